@@ -1,0 +1,66 @@
+# One-command set-up, tests, demo and benchmarks for lvws_ros.
+# `make test` and `make demo` create .venv when missing; re-running is a fast no-op.
+
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := $(CURDIR)/.venv
+PY := $(VENV)/bin/python
+BUILD := $(CURDIR)/build
+MSG_SRCS := $(wildcard msg_defs/msg/*.msg) msg_defs/CMakeLists.txt msg_defs/package.xml
+PKG_SRCS := setup.py setup.cfg package.xml resource/lvws_ros $(wildcard config/*) \
+  $(shell find lvws_ros -name '*.py' -o -name '*.pt' -o -name '*.json' 2>/dev/null)
+EXES := lvws scheduler cell_sim recorder
+
+# The environment is an ament prefix; these make ament_index and rclpy find it.
+export AMENT_PREFIX_PATH := $(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
+export PYTHONDONTWRITEBYTECODE := 1
+
+.PHONY: env msgs test lint demo bench clean distclean
+
+env: $(VENV)/.stamp-pkg
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+
+$(VENV)/.stamp-deps: requirements.txt | $(PY)
+	$(PY) -m pip install --quiet -r requirements.txt
+	touch $@
+
+# lvws_msgs: plain cmake against the environment (no colcon on pip installs).
+$(VENV)/.stamp-msgs: $(MSG_SRCS) $(VENV)/.stamp-deps
+	rm -rf $(BUILD)/lvws_msgs && mkdir -p $(BUILD)/lvws_msgs
+	cd $(BUILD)/lvws_msgs && cmake $(CURDIR)/msg_defs -DCMAKE_BUILD_TYPE=Release \
+	  -DCMAKE_PREFIX_PATH=$(VENV) -DCMAKE_INSTALL_PREFIX=$(VENV) \
+	  -DPython3_EXECUTABLE=$(PY) -DBUILD_TESTING=OFF > cmake.log \
+	  || { cat cmake.log; exit 1; }
+	$(MAKE) -C $(BUILD)/lvws_msgs -j2 install > $(BUILD)/lvws_msgs/make.log \
+	  || { tail -50 $(BUILD)/lvws_msgs/make.log; exit 1; }
+	touch $@
+
+# lvws_ros: a regular (not editable) install, since only that installs the ament
+# marker, package.xml and config/ under share/; then link the executables where
+# ros2run looks (<prefix>/lib/lvws_ros/), as setup.cfg does for colcon builds.
+$(VENV)/.stamp-pkg: $(PKG_SRCS) $(VENV)/.stamp-msgs
+	$(PY) -m pip install --quiet --no-deps --no-build-isolation .
+	rm -rf $(BUILD)/lib $(BUILD)/bdist.* lvws_ros.egg-info
+	mkdir -p $(VENV)/lib/lvws_ros
+	for exe in $(EXES); do ln -sf $(VENV)/bin/$$exe $(VENV)/lib/lvws_ros/$$exe; done
+	grep -q AMENT_PREFIX_PATH $(VENV)/bin/activate || \
+	  echo 'export AMENT_PREFIX_PATH="$$VIRTUAL_ENV$${AMENT_PREFIX_PATH:+:$$AMENT_PREFIX_PATH}"' >> $(VENV)/bin/activate
+	touch $@
+
+msgs: $(VENV)/.stamp-msgs
+
+test: env
+	$(PY) -m pytest -q test
+
+lint: env
+	$(PY) -m ruff check lvws_ros test
+	$(PY) -m mypy lvws_ros
+
+clean:
+	rm -rf $(BUILD) *.egg-info .pytest_cache .mypy_cache .ruff_cache
+
+distclean: clean
+	rm -rf $(VENV)
