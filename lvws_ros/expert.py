@@ -1,0 +1,298 @@
+"""Exact expert: minimum-makespan schedules with OR-Tools CP-SAT, with proofs.
+
+Model (per remaining task j, start S_j):
+  * exactly one inclusion-minimal covering subteam per task (Eqs. 10-11); since a task's
+    duration does not depend on its subteam, supersets are never needed for an optimum;
+  * per robot, an optional interval of length d_j at S_j present when the robot is in
+    the chosen subteam, and a no-overlap constraint over those intervals;
+  * precedence S_j >= S_i + d_i; makespan C >= S_j + d_j; minimise C;
+  * redundant cumulatives (robots in use, payload in use, holders of each capability in
+    use), start windows from longest paths before/after each task, and a hint from the
+    best heuristic schedule, which also bounds the horizon.
+
+It also solves from a mid-run :class:`~lvws_ros.executor.State`: tasks done or in
+progress stay as they are, busy robots are free only from their given time on, and
+nothing new starts before the state's time.
+
+An answer is called optimal only when CP-SAT proved it on exactly scaled durations;
+otherwise the status is ``feasible`` with the best bound and the gap.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from lvws_ros.executor import Decision, SimulationResult, State, TaskStatus, schedule_from_state, simulate
+from lvws_ros.model import Instance
+from lvws_ros.policies import GreedyPayloadPolicy, RandomSubteamPolicy
+from lvws_ros.schedule import Assignment, Schedule
+from lvws_ros.subteams import MAX_ENUMERATED, minimal_subteams
+
+SCALES = (1, 10, 100, 1000)
+MATCH_TOL = 1e-6
+
+
+class ExpertError(RuntimeError):
+    """The expert cannot handle the instance (too many robots) or found nothing."""
+
+
+@dataclass
+class ExpertResult:
+    schedule: Schedule | None
+    status: str  # optimal | feasible | unknown
+    makespan: float | None
+    bound: float
+    seconds: float
+    exact_scale: bool
+
+    @property
+    def proven(self) -> bool:
+        return self.status == "optimal"
+
+    @property
+    def gap(self) -> float:
+        """(makespan - bound) / makespan; 0 when proven optimal."""
+        if self.makespan is None or self.makespan <= 0:
+            return float("inf")
+        return max(0.0, (self.makespan - self.bound) / self.makespan)
+
+
+def _time_scale(values: np.ndarray) -> tuple[int, bool]:
+    for s in SCALES:
+        scaled = values * s
+        if np.all(np.abs(scaled - np.round(scaled)) < 1e-6):
+            return s, True
+    return SCALES[-1], False
+
+
+def heuristic_schedule(inst: Instance, state: State | None = None, seeds: int = 4) -> Schedule:
+    """Best of GRP and a few seeded RAND-w/-subteams runs (the expert's warm start)."""
+    runs: list[SimulationResult] = [simulate(inst, GreedyPayloadPolicy(), state=state)]
+    runs += [simulate(inst, RandomSubteamPolicy(seed=s), state=state) for s in range(seeds)]
+    return min(runs, key=lambda res: res.schedule.makespan).schedule
+
+
+def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> Schedule:
+    """Start every task as early as its prerequisites and robots allow, keeping each
+    robot's task order. The makespan never grows and every start falls on time 0 (or
+    the state's time) or on some task's end, i.e. on a decision step of the executor."""
+    t0 = state.time if state is not None else 0.0
+    robot_free = state.robot_free_at.copy() if state is not None else np.zeros(inst.num_robots)
+    end: dict[str, float] = {}
+    fixed: set[str] = set()
+    if state is not None:
+        for j in np.flatnonzero(state.task_status >= TaskStatus.ASSIGNED):
+            end[inst.tasks[j].id] = float(state.task_start[j] + inst.durations[j])
+            fixed.add(inst.tasks[j].id)
+    out = [a for a in sched.assignments if a.task in fixed]
+    for a in sorted((a for a in sched.assignments if a.task not in fixed), key=lambda a: (a.start, a.task)):
+        j = inst.task_index[a.task]
+        robots = [inst.robot_index[r] for r in a.robots]
+        start = max([t0, *(end[inst.tasks[p].id] for p in inst.prerequisites[j]), *(robot_free[r] for r in robots)])
+        stop = start + inst.durations[j]
+        end[a.task] = stop
+        robot_free[robots] = stop
+        out.append(Assignment(a.task, a.robots, float(start), float(stop)))
+    return Schedule.from_assignments(inst.name, sched.policy, out, sched.decisions, sched.compute_seconds)
+
+
+def solve_exact(
+    inst: Instance,
+    *,
+    state: State | None = None,
+    time_limit: float = 60.0,
+    workers: int = 8,
+    hint: Schedule | None = None,
+    seed: int = 0,
+) -> ExpertResult:
+    """Minimise the makespan of ``inst`` (from ``state`` when given) with CP-SAT."""
+    from ortools.sat.python import cp_model
+
+    t_start = time.perf_counter()
+    if inst.num_robots > MAX_ENUMERATED:
+        raise ExpertError(f"the exact expert handles at most {MAX_ENUMERATED} robots, got {inst.num_robots}")
+    state = State.initial(inst) if state is None else state.copy()
+    state.refresh()
+    if hint is None:
+        hint = heuristic_schedule(inst, state)
+    hint = left_shift(inst, hint, state)
+    t0 = state.time
+    status_arr = state.task_status
+    todo = [j for j in range(inst.num_tasks) if status_arr[j] in (TaskStatus.QUEUED, TaskStatus.READY)]
+    if not todo:
+        sched = schedule_from_state(state, "exact")
+        return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
+
+    fixed_end = {
+        j: float(state.task_start[j] + inst.durations[j])
+        for j in range(inst.num_tasks)
+        if status_arr[j] in (TaskStatus.ASSIGNED, TaskStatus.DONE)
+    }
+    times = np.concatenate([inst.durations, state.robot_free_at, [t0], np.array(list(fixed_end.values()))])
+    scale, exact_scale = _time_scale(times)
+
+    def ticks(x: float) -> int:
+        return int(round(x * scale))
+
+    dur = {j: max(1, ticks(inst.durations[j])) for j in todo}
+    free_at = [max(ticks(b), ticks(t0)) for b in state.robot_free_at]
+    teams = {
+        j: minimal_subteams(inst.robot_caps, inst.robot_payload, inst.task_caps[j], inst.tasks[j].payload)
+        for j in todo
+    }
+    for j in todo:
+        if not teams[j]:
+            raise ExpertError(f"task {inst.tasks[j].id!r} has no covering subteam")
+
+    # Start windows: heads (earliest start) in topological order, tails backwards.
+    head: dict[int, int] = {}
+    for j in inst.topological_order:
+        if j not in dur:
+            continue
+        lb = ticks(t0)
+        for p in inst.prerequisites[j]:
+            lb = max(lb, head[p] + dur[p] if p in dur else ticks(fixed_end[p]))
+        lb = max(lb, min(max(free_at[r] for r in team) for team in teams[j]))
+        head[j] = lb
+    tail: dict[int, int] = {}
+    for j in reversed(inst.topological_order):
+        if j in dur:
+            tail[j] = dur[j] + max((tail[s] for s in inst.successors[j] if s in dur), default=0)
+    lower = max([ticks(t0), *(head[j] + tail[j] for j in todo), *(ticks(e) for e in fixed_end.values())])
+    upper = max(ticks(hint.makespan), lower)
+
+    model = cp_model.CpModel()
+    start = {j: model.new_int_var(head[j], upper - tail[j], f"S_{j}") for j in todo}
+    makespan = model.new_int_var(lower, upper, "C")
+    task_iv = {j: model.new_fixed_size_interval_var(start[j], dur[j], f"I_{j}") for j in todo}
+    choice = {j: [model.new_bool_var(f"x_{j}_{k}") for k in range(len(teams[j]))] for j in todo}
+    per_robot: list[list[cp_model.IntervalVar]] = [[] for _ in inst.robots]
+    robot_count: dict[int, cp_model.IntVar] = {}
+    payload_use: dict[int, cp_model.IntVar] = {}
+    cap_use: list[dict[int, cp_model.IntVar]] = [{} for _ in inst.capabilities]
+    pay_int = np.round(inst.robot_payload * 1000).astype(np.int64)
+    for j in todo:
+        model.add_exactly_one(choice[j])
+        members = sorted({r for team in teams[j] for r in team})
+        for r in members:
+            uses = [choice[j][k] for k, team in enumerate(teams[j]) if r in team]
+            y = model.new_bool_var(f"y_{r}_{j}")
+            model.add(y == sum(uses))
+            per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
+            if free_at[r] > head[j]:
+                model.add(start[j] >= free_at[r]).only_enforce_if(y)
+        # Cumulative demands must be single variables in CP-SAT.
+        robot_count[j] = _demand(model, [len(team) for team in teams[j]], choice[j], f"n_{j}")
+        payload_use[j] = _demand(model, [int(pay_int[list(team)].sum()) for team in teams[j]], choice[j], f"w_{j}")
+        for c in range(len(inst.capabilities)):
+            holders = [int(inst.robot_caps[list(team), c].sum()) for team in teams[j]]
+            if any(holders):
+                cap_use[c][j] = _demand(model, holders, choice[j], f"c{c}_{j}")
+        for p in inst.prerequisites[j]:
+            if p in dur:
+                model.add(start[j] >= start[p] + dur[p])
+        model.add(makespan >= start[j] + dur[j])
+    for intervals in per_robot:
+        if len(intervals) > 1:
+            model.add_no_overlap(intervals)
+    ivs = [task_iv[j] for j in todo]
+    model.add_cumulative(ivs, [robot_count[j] for j in todo], inst.num_robots)
+    model.add_cumulative(ivs, [payload_use[j] for j in todo], int(pay_int.sum()))
+    for c, uses in enumerate(cap_use):
+        if uses:
+            holders_total = int(inst.robot_caps[:, c].sum())
+            model.add_cumulative([task_iv[j] for j in uses], list(uses.values()), holders_total)
+    model.minimize(makespan)
+
+    # Hint: the left-shifted heuristic schedule, with each subteam cut down to a minimal one.
+    by_task = hint.by_task()
+    for j in todo:
+        a = by_task.get(inst.tasks[j].id)
+        if a is None:
+            continue
+        model.add_hint(start[j], min(max(ticks(a.start), head[j]), upper - tail[j]))
+        robots = {inst.robot_index[r] for r in a.robots}
+        pick = next((k for k, team in enumerate(teams[j]) if set(team) <= robots), 0)
+        for k, x in enumerate(choice[j]):
+            model.add_hint(x, k == pick)
+    model.add_hint(makespan, upper)
+
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
+    solver.parameters.num_workers = workers
+    solver.parameters.random_seed = seed
+    code = solver.solve(model)
+    seconds = time.perf_counter() - t_start
+    bound = float(solver.best_objective_bound) / scale if code in (cp_model.OPTIMAL, cp_model.FEASIBLE) else lower / scale
+    if code == cp_model.MODEL_INVALID:
+        raise ExpertError(f"invalid CP-SAT model: {model.validate()}")
+    if code == cp_model.INFEASIBLE:
+        raise ExpertError(f"CP-SAT proved the model infeasible for {inst.name!r}; the hint schedule contradicts it")
+    if code not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        return ExpertResult(hint, "unknown", hint.makespan, bound, seconds, exact_scale)
+    out = []
+    for j in range(inst.num_tasks):
+        t = inst.tasks[j]
+        if j in fixed_end:
+            s0 = float(state.task_start[j])
+            out.append(Assignment(t.id, tuple(inst.robots[r].id for r in state.task_team[j]), s0, s0 + t.duration))
+            continue
+        k = next(k for k, x in enumerate(choice[j]) if solver.boolean_value(x))
+        s0 = solver.value(start[j]) / scale
+        out.append(Assignment(t.id, tuple(inst.robots[r].id for r in teams[j][k]), s0, s0 + t.duration))
+    sched = left_shift(inst, Schedule.from_assignments(inst.name, "exact", out), state)
+    if not exact_scale:
+        # Durations were rounded for CP-SAT: the real-time schedule is valid, not proven optimal.
+        status = "feasible"
+    else:
+        status = "optimal" if code == cp_model.OPTIMAL else "feasible"
+    if status == "optimal":
+        bound = sched.makespan
+    sched.compute_seconds = seconds
+    return ExpertResult(sched, status, sched.makespan, min(bound, sched.makespan), seconds, exact_scale)
+
+
+def _demand(model: object, values: list[int], choice: list[object], name: str) -> object:
+    """An integer variable equal to the value of the chosen alternative."""
+    var = model.new_int_var(min(values), max(values), name)  # type: ignore[attr-defined]
+    model.add(var == sum(v * x for v, x in zip(values, choice, strict=True)))  # type: ignore[attr-defined]
+    return var
+
+
+class ExactPolicy:
+    """Follows the expert's schedule: at each decision step, starts the tasks the
+    expert planned to start now, with the planned subteams (the ``exact`` policy)."""
+
+    name = "exact"
+
+    def __init__(self, time_limit: float = 60.0, workers: int = 8, seed: int = 0) -> None:
+        self.time_limit = time_limit
+        self.workers = workers
+        self.seed = seed
+        self.result: ExpertResult | None = None
+        self._plan: dict[int, Assignment] = {}
+
+    def reset(self, instance: Instance) -> None:
+        self.result = None
+        self._plan = {}
+
+    def decide(self, state: State) -> Decision:
+        inst = state.instance
+        if self.result is None:
+            self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed)
+            assert self.result.schedule is not None
+            self._plan = {inst.task_index[a.task]: a for a in self.result.schedule.assignments}
+        free = set(state.free_robots())
+        out = []
+        for j in state.ready_tasks():
+            a = self._plan.get(j)
+            if a is None or abs(a.start - state.time) > MATCH_TOL:
+                continue
+            team = tuple(inst.robot_index[r] for r in a.robots)
+            if set(team) <= free:
+                out.append((j, team))
+                free -= set(team)
+        return Decision(tuple(out), tuple(sorted(free)))
