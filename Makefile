@@ -52,7 +52,7 @@ $(VENV)/.stamp-pkg: $(PKG_SRCS) $(VENV)/.stamp-msgs
 
 msgs: $(VENV)/.stamp-msgs
 
-test: env
+test: env lint
 	$(PY) -m pytest -q test
 
 lint: env

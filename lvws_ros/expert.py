@@ -21,9 +21,11 @@ otherwise the status is ``feasible`` with the best bound and the gap.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from ortools.sat.python import cp_model
 
 from lvws_ros.executor import Decision, SimulationResult, State, TaskStatus, schedule_from_state, simulate
 from lvws_ros.model import Instance
@@ -84,9 +86,9 @@ def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> S
     end: dict[str, float] = {}
     fixed: set[str] = set()
     if state is not None:
-        for j in np.flatnonzero(state.task_status >= TaskStatus.ASSIGNED):
-            end[inst.tasks[j].id] = float(state.task_start[j] + inst.durations[j])
-            fixed.add(inst.tasks[j].id)
+        for k in np.flatnonzero(state.task_status >= TaskStatus.ASSIGNED):
+            end[inst.tasks[k].id] = float(state.task_start[k] + inst.durations[k])
+            fixed.add(inst.tasks[k].id)
     out = [a for a in sched.assignments if a.task in fixed]
     for a in sorted((a for a in sched.assignments if a.task not in fixed), key=lambda a: (a.start, a.task)):
         j = inst.task_index[a.task]
@@ -109,8 +111,6 @@ def solve_exact(
     seed: int = 0,
 ) -> ExpertResult:
     """Minimise the makespan of ``inst`` (from ``state`` when given) with CP-SAT."""
-    from ortools.sat.python import cp_model
-
     t_start = time.perf_counter()
     if inst.num_robots > MAX_ENUMERATED:
         raise ExpertError(f"the exact expert handles at most {MAX_ENUMERATED} robots, got {inst.num_robots}")
@@ -135,7 +135,7 @@ def solve_exact(
     scale, exact_scale = _time_scale(times)
 
     def ticks(x: float) -> int:
-        return int(round(x * scale))
+        return round(x * scale)
 
     dur = {j: max(1, ticks(inst.durations[j])) for j in todo}
     free_at = [max(ticks(b), ticks(t0)) for b in state.robot_free_at]
@@ -201,10 +201,10 @@ def solve_exact(
     ivs = [task_iv[j] for j in todo]
     model.add_cumulative(ivs, [robot_count[j] for j in todo], inst.num_robots)
     model.add_cumulative(ivs, [payload_use[j] for j in todo], int(pay_int.sum()))
-    for c, uses in enumerate(cap_use):
-        if uses:
+    for c, demand_by_task in enumerate(cap_use):
+        if demand_by_task:
             holders_total = int(inst.robot_caps[:, c].sum())
-            model.add_cumulative([task_iv[j] for j in uses], list(uses.values()), holders_total)
+            model.add_cumulative([task_iv[j] for j in demand_by_task], list(demand_by_task.values()), holders_total)
     model.minimize(makespan)
 
     # Hint: the left-shifted heuristic schedule, with each subteam cut down to a minimal one.
@@ -255,10 +255,10 @@ def solve_exact(
     return ExpertResult(sched, status, sched.makespan, min(bound, sched.makespan), seconds, exact_scale)
 
 
-def _demand(model: object, values: list[int], choice: list[object], name: str) -> object:
+def _demand(model: cp_model.CpModel, values: list[int], choice: Sequence[cp_model.IntVar], name: str) -> cp_model.IntVar:
     """An integer variable equal to the value of the chosen alternative."""
-    var = model.new_int_var(min(values), max(values), name)  # type: ignore[attr-defined]
-    model.add(var == sum(v * x for v, x in zip(values, choice, strict=True)))  # type: ignore[attr-defined]
+    var = model.new_int_var(min(values), max(values), name)
+    model.add(var == sum(v * x for v, x in zip(values, choice, strict=True)))
     return var
 
 

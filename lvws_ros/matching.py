@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from lvws_ros.model import BoolArray, FloatArray
-from lvws_ros.subteams import PAYLOAD_TOL
+from lvws_ros.subteams import PAYLOAD_TOL, covers
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,8 @@ def greedy_match(
     Repeatedly takes the largest reward among (free robot, open task) pairs in which the
     robot still helps the task (adds a missing capability or missing payload) and
     (free robot, idle task). A robot picked for a task joins its partial subteam; the
-    task closes once covered. A partial subteam that the remaining free robots can no
+    task closes once covered, and members made redundant by later ones are released,
+    so subteams are inclusion-minimal. A partial subteam that the remaining free robots can no
     longer complete releases its robots, which go back into the matching. Each pick
     is one vectorised argmax over n x (m+1): O(n * m) per pick, O(n^2 m) worst case.
     """
@@ -75,22 +76,23 @@ def greedy_match(
     closed_teams: dict[int, tuple[int, ...]] = {}
     caps_f = robot_caps.astype(np.float64)
     while True:
-        # Release partial subteams that the free robots can no longer complete.
-        if open_task.any():
-            free_caps = robot_caps[free].any(axis=0) if free.any() else np.zeros(task_caps.shape[1], bool)
-            free_payload = float(robot_payload[free].sum())
-            completable = (~missing_caps | free_caps).all(axis=1) & (missing_payload <= free_payload + PAYLOAD_TOL)
-            dead = open_task & ~completable
-            if dead.any():
-                released = member[:, dead].any(axis=1)
-                free |= released
-                member[:, dead] = False
-                open_task &= ~dead
-                continue
+        # A task is completable when its missing capabilities and payload can still come
+        # from free robots. A partial subteam that cannot be completed releases its robots
+        # (one task at a time, since released robots may complete another).
+        free_caps = robot_caps[free].any(axis=0) if free.any() else np.zeros(task_caps.shape[1], bool)
+        free_payload = float(robot_payload[free].sum())
+        completable = (~missing_caps | free_caps).all(axis=1) & (missing_payload <= free_payload + PAYLOAD_TOL)
+        dead = np.flatnonzero(open_task & ~completable & member.any(axis=0))
+        if len(dead):
+            j = int(dead[0])
+            free |= member[:, j]
+            member[:, j] = False
+            open_task[j] = False
+            continue
         if not free.any():
             break
         helps = (caps_f @ missing_caps.T.astype(np.float64) > 0) | (missing_payload > PAYLOAD_TOL)[None, :]
-        ok = free[:, None] & open_task[None, :] & helps
+        ok = free[:, None] & (open_task & completable)[None, :] & helps
         scores = np.where(ok, r[:, :m], -np.inf)
         idle = np.where(free, r[:, m], -np.inf)
         flat = int(np.argmax(np.concatenate([scores, idle[:, None]], axis=1)))
@@ -103,8 +105,17 @@ def greedy_match(
         missing_caps[j] &= ~robot_caps[i]
         missing_payload[j] -= robot_payload[i]
         if not missing_caps[j].any() and missing_payload[j] <= PAYLOAD_TOL:
+            # Members made redundant by later ones go back to the pool, cheapest first,
+            # so every closed subteam is inclusion-minimal.
+            team = [int(x) for x in np.flatnonzero(member[:, j])]
+            for q in sorted(team, key=lambda q: r[q, j]):
+                rest = [x for x in team if x != q]
+                if rest and covers(robot_caps[rest], robot_payload[rest], task_caps[j], task_payload[j]):
+                    team = rest
+                    member[q, j] = False
+                    free[q] = True
             open_task[j] = False
-            closed_teams[j] = tuple(int(x) for x in np.flatnonzero(member[:, j]))
+            closed_teams[j] = tuple(team)
     wait = tuple(int(i) for i in np.flatnonzero(waiting))
     return Match(closed_teams, wait, match_reward(r, closed_teams, wait))
 
@@ -118,8 +129,14 @@ def exact_match(
     *,
     time_limit: float = 10.0,
     workers: int = 2,
+    necessary_only: bool = True,
 ) -> Match:
-    """Optimal A* of Eqs. 7-11 with CP-SAT (rewards scaled to integers, 1e-6 resolution)."""
+    """Optimal A* of Eqs. 7-11 with CP-SAT (rewards scaled to integers, 1e-6 resolution).
+
+    With ``necessary_only`` (the default, the same problem :func:`greedy_match` solves)
+    every member of a subteam must be needed: without it the task would lack a capability
+    or payload. Without it, any robot may join a covered task when that pays more.
+    """
     from ortools.sat.python import cp_model
 
     n, m = _check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
@@ -139,7 +156,21 @@ def exact_match(
                 model.add_bool_or(holders).only_enforce_if(z[j])
             else:
                 model.add(z[j] == 0)
-        model.add(sum(int(pay[i]) * a[i][j] for i in range(n)) >= int(need[j])).only_enforce_if(z[j])  # Eq. 11
+        carried = sum(int(pay[i]) * a[i][j] for i in range(n))
+        model.add(carried >= int(need[j])).only_enforce_if(z[j])  # Eq. 11
+        if necessary_only:
+            for i in range(n):
+                reasons = []
+                short = model.new_bool_var(f"short_{i}_{j}")  # payload would fall short without i
+                model.add(carried - int(pay[i]) < int(need[j])).only_enforce_if(short)
+                reasons.append(short)
+                for k in np.flatnonzero(task_caps[j] & robot_caps[i]):
+                    sole = model.new_bool_var(f"sole_{i}_{j}_{k}")  # i is the only holder of k
+                    others = [a[q][j] for q in range(n) if q != i and robot_caps[q, k]]
+                    if others:
+                        model.add(sum(others) == 0).only_enforce_if(sole)
+                    reasons.append(sole)
+                model.add_bool_or(reasons).only_enforce_if(a[i][j])
     scaled = np.round(r * 1e6).astype(np.int64)
     model.maximize(sum(int(scaled[i, j]) * a[i][j] for i in range(n) for j in range(m + 1)))
     solver = cp_model.CpSolver()

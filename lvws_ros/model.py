@@ -374,8 +374,16 @@ def load_instance(path: str | Path) -> Instance:
 
 
 def dumps(data: Mapping[str, Any]) -> str:
-    """Canonical JSON text: same object, same bytes."""
-    return json.dumps(data, indent=2, allow_nan=False) + "\n"
+    """Canonical JSON text (same object, same bytes): one line per top-level key, and
+    one line per element of a list of objects (robots, tasks, assignments)."""
+    lines = []
+    for key, value in data.items():
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            items = ",\n".join("    " + json.dumps(v, allow_nan=False) for v in value)
+            lines.append(f"  {json.dumps(key)}: [\n{items}\n  ]")
+        else:
+            lines.append(f"  {json.dumps(key)}: {json.dumps(value, allow_nan=False)}")
+    return "{\n" + ",\n".join(lines) + "\n}\n"
 
 
 def save_instance(inst: Instance, path: str | Path) -> None:

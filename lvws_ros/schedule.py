@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -153,7 +154,9 @@ def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[
         t = inst.tasks[inst.task_index[a.task]]
         members = [inst.robot_index[r] for r in a.robots if r in inst.robot_index]
         # Rule 2: capability OR covers the task, payloads add up.
-        caps = inst.robot_caps[members].any(axis=0) if members else np.zeros(len(inst.capabilities), bool)
+        caps = np.zeros(len(inst.capabilities), dtype=bool)
+        if members:
+            caps = np.asarray(inst.robot_caps[members].any(axis=0))
         missing = [inst.capabilities[c] for c, need in enumerate(t.capabilities) if need and not caps[c]]
         if missing:
             v.append(Violation(2, f"task {t.id!r}: subteam {list(a.robots)} lacks capability {missing}"))
@@ -177,9 +180,10 @@ def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[
             per_robot.setdefault(r, []).append(a)
     for r, items in sorted(per_robot.items()):
         items.sort(key=lambda a: (a.start, a.end))
-        for x, y in zip(items, items[1:], strict=False):
+        for x, y in pairwise(items):
             if y.start < x.end - tol:
-                v.append(Violation(5, f"robot {r!r} is in {x.task!r} [{x.start:g}, {x.end:g}) and {y.task!r} [{y.start:g}, {y.end:g}) at once"))
+                v.append(Violation(5, f"robot {r!r} is in {x.task!r} [{x.start:g}, {x.end:g}) "
+                                      f"and {y.task!r} [{y.start:g}, {y.end:g}) at once"))
     # Rule 6: makespan is the largest end.
     latest = max((a.end for a in s.assignments), default=0.0)
     if abs(s.makespan - latest) > tol:

@@ -1,0 +1,135 @@
+"""Metrics of the LVWS paper (section IV): makespan and suboptimality against the
+exact solver, plus validity rate and decision time; evaluation tables as markdown/CSV."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import statistics
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from lvws_ros.executor import PolicyError, simulate
+from lvws_ros.expert import ExpertResult, solve_exact
+from lvws_ros.model import Instance
+from lvws_ros.policies import make_policy
+from lvws_ros.schedule import check_schedule
+
+
+def suboptimality(makespan: float, optimal: float) -> float:
+    """Percent increase of ``makespan`` over the proven optimal makespan."""
+    if optimal <= 0:
+        raise ValueError("optimal makespan must be > 0")
+    return 100.0 * (makespan - optimal) / optimal
+
+
+@dataclass(frozen=True)
+class ExpertRecord:
+    """The exact solver's answer for one instance (cached between evaluations)."""
+
+    instance: str
+    status: str
+    makespan: float
+    bound: float
+    seconds: float
+
+    @classmethod
+    def from_result(cls, name: str, res: ExpertResult) -> ExpertRecord:
+        assert res.makespan is not None
+        return cls(name, res.status, float(res.makespan), float(res.bound), float(res.seconds))
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    instance: str
+    policy: str
+    valid: bool
+    makespan: float
+    decisions: int
+    compute_seconds: float
+    error: str = ""
+
+
+@dataclass(frozen=True)
+class PolicySummary:
+    policy: str
+    instances: int
+    valid_rate: float
+    mean_makespan: float
+    mean_suboptimality: float  # over instances with a proven optimum
+    proven: int
+    mean_decision_ms: float
+
+
+def expert_records(instances: Sequence[Instance], cache: Path | None, time_limit: float,
+                   workers: int, progress: bool = True) -> dict[str, ExpertRecord]:
+    """Exact makespans, reusing ``cache`` (a JSON file) for instances already solved."""
+    from tqdm import tqdm
+
+    known: dict[str, ExpertRecord] = {}
+    if cache is not None and cache.is_file():
+        known = {k: ExpertRecord(**v) for k, v in json.loads(cache.read_text()).items()}
+    todo = [inst for inst in instances if inst.name not in known]
+    for inst in tqdm(todo, desc="exact expert", disable=not progress or not todo, unit="inst"):
+        known[inst.name] = ExpertRecord.from_result(inst.name, solve_exact(inst, time_limit=time_limit, workers=workers))
+        if cache is not None:
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            cache.write_text(json.dumps({k: asdict(v) for k, v in sorted(known.items())}, indent=1))
+    return known
+
+
+def run_policy(inst: Instance, policy: str, seed: int, **options: object) -> RunRecord:
+    try:
+        res = simulate(inst, make_policy(policy, seed=seed, **options))
+    except PolicyError as exc:
+        return RunRecord(inst.name, policy, False, math.nan, 0, 0.0, str(exc))
+    problems = check_schedule(inst, res.schedule)
+    return RunRecord(inst.name, policy, not problems, res.schedule.makespan, res.schedule.decisions,
+                     res.schedule.compute_seconds, "; ".join(map(str, problems)))
+
+
+def summarize(runs: Iterable[RunRecord], experts: dict[str, ExpertRecord]) -> list[PolicySummary]:
+    by_policy: dict[str, list[RunRecord]] = {}
+    for r in runs:
+        by_policy.setdefault(r.policy, []).append(r)
+    out = []
+    for policy, rows in by_policy.items():
+        valid = [r for r in rows if r.valid]
+        proven = [r for r in valid if r.instance in experts and experts[r.instance].status == "optimal"]
+        subs = [suboptimality(r.makespan, experts[r.instance].makespan) for r in proven]
+        decisions = sum(r.decisions for r in valid)
+        out.append(PolicySummary(
+            policy=policy,
+            instances=len(rows),
+            valid_rate=len(valid) / len(rows) if rows else 0.0,
+            mean_makespan=statistics.fmean(r.makespan for r in valid) if valid else math.nan,
+            mean_suboptimality=statistics.fmean(subs) if subs else math.nan,
+            proven=len(proven),
+            mean_decision_ms=1000 * sum(r.compute_seconds for r in valid) / decisions if decisions else math.nan,
+        ))
+    return out
+
+
+HEADERS = ["policy", "instances", "valid %", "mean makespan", "suboptimality %", "proven optima", "decision ms"]
+
+
+def _cells(s: PolicySummary) -> list[str]:
+    return [s.policy, str(s.instances), f"{100 * s.valid_rate:.1f}", f"{s.mean_makespan:.2f}",
+            f"{s.mean_suboptimality:.2f}", str(s.proven), f"{s.mean_decision_ms:.3f}"]
+
+
+def to_markdown(rows: Sequence[PolicySummary]) -> str:
+    lines = ["| " + " | ".join(HEADERS) + " |", "|" + "---|" * len(HEADERS)]
+    lines += ["| " + " | ".join(_cells(s)) + " |" for s in rows]
+    return "\n".join(lines) + "\n"
+
+
+def to_csv(rows: Sequence[PolicySummary]) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(HEADERS)
+    writer.writerows(_cells(s) for s in rows)
+    return buf.getvalue()

@@ -1,0 +1,65 @@
+"""The `lvws` command as a new user runs it on the shipped example instance."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from conftest import REPO
+
+EXAMPLE = REPO / "config" / "example_instance.json"
+
+
+def lvws(*args, check=True):
+    res = subprocess.run([sys.executable, "-m", "lvws_ros.cli", *map(str, args)],
+                         capture_output=True, text=True, timeout=600)
+    if check:
+        assert res.returncode == 0, res.stderr
+    return res
+
+
+@pytest.mark.parametrize("verb", ["", "generate", "solve", "check", "evaluate", "gantt"])
+def test_help_on_every_verb(verb):
+    res = lvws(*([verb] if verb else []), "--help")
+    assert "usage: lvws" in res.stdout
+
+
+def test_solve_check_gantt(tmp_path):
+    out = tmp_path / "exact.json"
+    res = lvws("solve", EXAMPLE, "--policy", "exact", "--workers", "2", "--out", out)
+    printed = json.loads(res.stdout)
+    assert printed["format"] == "lvws-schedule/1" and printed["status"] == "optimal"
+    assert json.loads(out.read_text())["makespan"] == printed["makespan"]
+    assert lvws("check", EXAMPLE, out).stdout.startswith("valid")
+    grp = tmp_path / "grp.json"
+    lvws("solve", EXAMPLE, "--policy", "grp", "--out", grp)
+    assert json.loads(grp.read_text())["makespan"] >= printed["makespan"]
+    png = tmp_path / "gantt.png"
+    lvws("gantt", out, "--instance", EXAMPLE, "--out", png)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+
+
+def test_generate_and_evaluate(tmp_path):
+    lvws("generate", "--dataset", "I", "--out", tmp_path / "ds", "--count", 804, "--quiet")
+    assert len(list((tmp_path / "ds" / "test").glob("*.json"))) == 4
+    res = lvws("evaluate", tmp_path / "ds" / "test", "--policies", "grp,rand", "--workers", "2",
+               "--out-dir", tmp_path / "res", "--quiet")
+    assert "| grp | 4 | 100.0 |" in res.stdout and "| rand | 4 | 100.0 |" in res.stdout
+    assert "4/4 optima proven" in res.stdout
+    csv = (tmp_path / "res" / "results.csv").read_text().splitlines()
+    assert csv[0].startswith("policy,instances") and len(csv) == 3
+
+
+def test_bad_input_exits_2_with_message(tmp_path):
+    bad = tmp_path / "cyc.json"
+    data = json.loads(EXAMPLE.read_text())
+    data["tasks"][0]["after"] = [data["tasks"][-1]["id"]]
+    data["tasks"][-1]["after"] = [data["tasks"][0]["id"]]
+    bad.write_text(json.dumps(data))
+    res = lvws("solve", bad, check=False)
+    assert res.returncode == 2 and "cyclic prerequisites" in res.stderr
+    res = lvws("solve", tmp_path / "missing.json", check=False)
+    assert res.returncode == 2 and "cannot read" in res.stderr

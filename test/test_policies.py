@@ -1,0 +1,100 @@
+"""Every policy yields valid schedules (formats.md rules) on generated instances,
+including one robot and one task; bad policies are stopped with a message."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lvws_ros.datasets import random_instance
+from lvws_ros.executor import Decision, PolicyError, State, simulate
+from lvws_ros.policies import POLICY_NAMES, make_policy
+from lvws_ros.schedule import check_schedule
+
+BASELINES = ["grp", "rand", "rand_subteam"]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 8), m=st.integers(1, 20),
+       policy=st.sampled_from(BASELINES), policy_seed=st.integers(0, 1000))
+def test_baselines_give_valid_schedules(seed, n, m, policy, policy_seed):
+    inst = random_instance(np.random.default_rng(seed), n, m, "h")
+    res = simulate(inst, make_policy(policy, seed=policy_seed))
+    assert check_schedule(inst, res.schedule) == []
+    assert res.schedule.decisions == len(res.steps) >= 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 5), m=st.integers(1, 9))
+def test_exact_policy_gives_valid_optimal_schedules(seed, n, m):
+    inst = random_instance(np.random.default_rng(seed), n, m, "h")
+    policy = make_policy("exact", time_limit=20, workers=2)
+    res = simulate(inst, policy)
+    assert check_schedule(inst, res.schedule) == []
+    assert policy.result.status == "optimal"
+    assert res.schedule.makespan == pytest.approx(policy.result.makespan)
+    for name in BASELINES:
+        assert simulate(inst, make_policy(name)).schedule.makespan >= res.schedule.makespan - 1e-9
+
+
+@pytest.mark.parametrize("n,m", [(1, 1), (1, 6), (5, 1)])
+def test_edge_sizes(n, m):
+    inst = random_instance(np.random.default_rng(3), n, m, "edge")
+    for name in [*BASELINES, "exact"]:
+        res = simulate(inst, make_policy(name, workers=2) if name == "exact" else make_policy(name))
+        assert check_schedule(inst, res.schedule) == [], name
+
+
+def test_single_robot_makespan_is_sum_of_durations():
+    inst = random_instance(np.random.default_rng(11), 1, 7, "solo")
+    for name in BASELINES:
+        assert simulate(inst, make_policy(name)).schedule.makespan == pytest.approx(inst.durations.sum())
+
+
+def test_same_seed_same_schedule():
+    inst = random_instance(np.random.default_rng(5), 6, 18, "seeded")
+    for name in ["rand", "rand_subteam"]:
+        a = simulate(inst, make_policy(name, seed=4)).schedule.assignments
+        b = simulate(inst, make_policy(name, seed=4)).schedule.assignments
+        assert a == b
+
+
+class Lazy:
+    name = "lazy"
+
+    def reset(self, instance):
+        pass
+
+    def decide(self, state: State) -> Decision:
+        return Decision((), tuple(state.free_robots()))
+
+
+class Cheater:
+    name = "cheater"
+
+    def reset(self, instance):
+        pass
+
+    def decide(self, state: State) -> Decision:
+        queued = [j for j in range(state.instance.num_tasks) if j not in state.ready_tasks()]
+        return Decision(((queued[0], (0,)),)) if queued else Decision(((state.ready_tasks()[0], (0,)),))
+
+
+def test_no_progress_is_an_error_not_a_loop():
+    inst = random_instance(np.random.default_rng(1), 3, 4, "x")
+    with pytest.raises(PolicyError, match="no progress"):
+        simulate(inst, Lazy())
+
+
+def test_unready_task_or_uncovering_team_is_rejected():
+    inst = random_instance(np.random.default_rng(2), 3, 6, "x")
+    with pytest.raises(PolicyError, match=r"not ready|does not cover"):
+        simulate(inst, Cheater())
+
+
+def test_policy_names():
+    assert set(BASELINES) | {"exact"} <= set(POLICY_NAMES)
+    with pytest.raises(ValueError, match="unknown policy"):
+        make_policy("nope")
