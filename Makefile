@@ -55,6 +55,10 @@ msgs: $(VENV)/.stamp-msgs
 test: env lint
 	$(PY) -m pytest -q test
 
+# Benchmarks print figures (with the machine); they assert nothing and are not in `make test`.
+bench: env
+	$(PY) -m lvws_ros.bench
+
 lint: env
 	$(PY) -m ruff check lvws_ros test
 	$(PY) -m mypy lvws_ros

@@ -387,4 +387,5 @@ def dumps(data: Mapping[str, Any]) -> str:
 
 
 def save_instance(inst: Instance, path: str | Path) -> None:
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text(dumps(instance_to_dict(inst)), encoding="utf-8")

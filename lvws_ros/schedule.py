@@ -115,6 +115,7 @@ def load_schedule(path: str | Path) -> Schedule:
 
 
 def save_schedule(s: Schedule, path: str | Path) -> None:
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text(dumps(schedule_to_dict(s)), encoding="utf-8")
 
 

@@ -1,0 +1,129 @@
+"""Benchmarks of the scheduling core (``make bench``); figures are printed, never asserted.
+
+* matching decision time (greedy, Eqs. 7-11) for N x M free robots x ready tasks;
+* the exact expert on Dataset I test instances: share proven optimal, solve times;
+* the baselines' suboptimality on the Dataset I test split beside the paper's figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import time
+
+import numpy as np
+
+from lvws_ros.datasets import DATASETS, dataset_instance
+from lvws_ros.expert import solve_exact
+from lvws_ros.matching import exact_match, greedy_match
+from lvws_ros.metrics import run_policy, suboptimality
+
+PAPER_TABLE_I = {"rand": 23.0, "rand_subteam": 11.8, "grp": 15.8}
+
+
+def machine() -> str:
+    return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def bench_matching(repeats: int, seed: int) -> None:
+    print(f"\n## Greedy subteam matching (Eqs. 7-11), seed {seed}, median of {repeats}")
+    print("| N robots | M tasks | ms / decision |")
+    print("|---|---|---|")
+    rng = np.random.default_rng(seed)
+    for n in (25, 50, 100):
+        for m in (50, 100, 500):
+            robot_caps = rng.integers(0, 2, size=(n, 3)).astype(bool)
+            robot_caps[~robot_caps.any(axis=1), 0] = True
+            task_caps = rng.integers(0, 2, size=(m, 3)).astype(bool)
+            task_caps[~task_caps.any(axis=1), 1] = True
+            robot_payload = rng.integers(1, 31, size=n).astype(float)
+            task_payload = np.clip(rng.poisson(10, size=m), 1, 30).astype(float)
+            times = []
+            for _ in range(repeats):
+                r = rng.normal(size=(n, m + 1))
+                t0 = time.perf_counter()
+                greedy_match(r, robot_caps, robot_payload, task_caps, task_payload)
+                times.append(time.perf_counter() - t0)
+            print(f"| {n} | {m} | {1000 * statistics.median(times):.2f} |")
+
+
+def bench_greedy_vs_exact(cases: int, seed: int) -> None:
+    """How often the greedy reaches the optimum of Eqs. 7-11 (CP-SAT) on random rewards."""
+    rng = np.random.default_rng(seed)
+    equal, ratios = 0, []
+    for _ in range(cases):
+        n, m = int(rng.integers(2, 9)), int(rng.integers(1, 7))
+        robot_caps = rng.integers(0, 2, size=(n, 3)).astype(bool)
+        robot_caps[~robot_caps.any(axis=1), 0] = True
+        task_caps = rng.integers(0, 2, size=(m, 3)).astype(bool)
+        task_caps[~task_caps.any(axis=1), 1] = True
+        args = (rng.uniform(0, 1, size=(n, m + 1)), robot_caps, rng.integers(1, 31, size=n).astype(float),
+                task_caps, np.clip(rng.poisson(10, size=m), 1, 30).astype(float))
+        g, e = greedy_match(*args), exact_match(*args)
+        equal += abs(g.reward - e.reward) < 1e-5
+        ratios.append(g.reward / e.reward if e.reward > 0 else 1.0)
+    print(f"\n## Greedy vs exact matching on {cases} random cases (N 2-8, M 1-6, rewards U(0,1), seed {seed})")
+    print(f"greedy reaches the exact optimum in {equal}/{cases} ({100 * equal / cases:.1f} %); "
+          f"mean greedy/exact reward {statistics.fmean(ratios):.4f}, worst {min(ratios):.4f}")
+
+
+def bench_expert(count: int, workers: int, time_limit: float, seed: int) -> dict[str, float]:
+    spec = DATASETS["I"]
+    print(f"\n## Exact expert (CP-SAT) on {count} Dataset I test instances "
+          f"(seed {seed}, {workers} workers, limit {time_limit:g} s)")
+    optimal: dict[str, float] = {}
+    times = []
+    proven = 0
+    for k in range(spec.train, spec.train + count):
+        inst = dataset_instance(spec, k, seed)
+        res = solve_exact(inst, workers=workers, time_limit=time_limit)
+        times.append(res.seconds)
+        if res.proven and res.makespan is not None:
+            proven += 1
+            optimal[inst.name] = res.makespan
+    print(f"proven optimal: {proven}/{count} ({100 * proven / count:.1f} %); "
+          f"solve time median {statistics.median(times):.3f} s, max {max(times):.3f} s")
+    return optimal
+
+
+def bench_baselines(count: int, seed: int, workers: int, time_limit: float) -> None:
+    spec = DATASETS["I"]
+    print(f"\n## Baselines on the Dataset I test split ({count} instances, dataset seed {seed}, policy seed 0)")
+    instances = [dataset_instance(spec, k, seed) for k in range(spec.train, spec.train + count)]
+    optimal = {}
+    for inst in instances:
+        res = solve_exact(inst, workers=workers, time_limit=time_limit)
+        if res.proven and res.makespan is not None:
+            optimal[inst.name] = res.makespan
+    print(f"optima proven for {len(optimal)}/{count} instances (suboptimality over those)")
+    print("| policy | ours: suboptimality % | paper: suboptimality % | valid % |")
+    print("|---|---|---|---|")
+    for policy in ("rand", "rand_subteam", "grp"):
+        runs = [run_policy(inst, policy, seed=0) for inst in instances]
+        subs = [suboptimality(r.makespan, optimal[r.instance]) for r in runs if r.valid and r.instance in optimal]
+        valid = 100 * sum(r.valid for r in runs) / len(runs)
+        print(f"| {policy} | {statistics.fmean(subs):.2f} | {PAPER_TABLE_I[policy]:.2f} | {valid:.1f} |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m lvws_ros.bench", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seed", type=int, default=0, help="dataset and matching seed")
+    parser.add_argument("--repeats", type=int, default=20)
+    parser.add_argument("--expert-count", type=int, default=50)
+    parser.add_argument("--baseline-count", type=int, default=200)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--time-limit", type=float, default=60.0)
+    args = parser.parse_args(argv)
+    print(f"# lvws_ros core benchmarks — {machine()}")
+    bench_matching(args.repeats, args.seed)
+    bench_greedy_vs_exact(200, args.seed)
+    bench_expert(args.expert_count, args.workers, args.time_limit, args.seed)
+    bench_baselines(args.baseline_count, args.seed, args.workers, args.time_limit)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
