@@ -27,6 +27,18 @@ def machine() -> str:
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
+def random_matching_case(rng: np.random.Generator, n: int, m: int, k: int = 3) -> tuple[np.ndarray, ...]:
+    """(R ~ N(0, 1), robot caps, robot payloads, task caps, task payloads) for n free
+    robots and m ready tasks, drawn like the datasets (payloads 1-30, Poisson(10))."""
+    robot_caps = rng.integers(0, 2, size=(n, k)).astype(bool)
+    robot_caps[~robot_caps.any(axis=1), 0] = True
+    task_caps = rng.integers(0, 2, size=(m, k)).astype(bool)
+    task_caps[~task_caps.any(axis=1), 1] = True
+    robot_payload = rng.integers(1, 31, size=n).astype(float)
+    task_payload = np.clip(rng.poisson(10, size=m), 1, 30).astype(float)
+    return rng.normal(size=(n, m + 1)), robot_caps, robot_payload, task_caps, task_payload
+
+
 def bench_matching(repeats: int, seed: int) -> None:
     print(f"\n## Greedy subteam matching (Eqs. 7-11), seed {seed}, median of {repeats}")
     print("| N robots | M tasks | ms / decision |")
@@ -34,17 +46,12 @@ def bench_matching(repeats: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
     for n in (25, 50, 100):
         for m in (50, 100, 500):
-            robot_caps = rng.integers(0, 2, size=(n, 3)).astype(bool)
-            robot_caps[~robot_caps.any(axis=1), 0] = True
-            task_caps = rng.integers(0, 2, size=(m, 3)).astype(bool)
-            task_caps[~task_caps.any(axis=1), 1] = True
-            robot_payload = rng.integers(1, 31, size=n).astype(float)
-            task_payload = np.clip(rng.poisson(10, size=m), 1, 30).astype(float)
+            _, *problem = random_matching_case(rng, n, m)
             times = []
             for _ in range(repeats):
                 r = rng.normal(size=(n, m + 1))
                 t0 = time.perf_counter()
-                greedy_match(r, robot_caps, robot_payload, task_caps, task_payload)
+                greedy_match(r, *problem)
                 times.append(time.perf_counter() - t0)
             print(f"| {n} | {m} | {1000 * statistics.median(times):.2f} |")
 
@@ -55,12 +62,8 @@ def bench_greedy_vs_exact(cases: int, seed: int) -> None:
     equal, ratios = 0, []
     for _ in range(cases):
         n, m = int(rng.integers(2, 9)), int(rng.integers(1, 7))
-        robot_caps = rng.integers(0, 2, size=(n, 3)).astype(bool)
-        robot_caps[~robot_caps.any(axis=1), 0] = True
-        task_caps = rng.integers(0, 2, size=(m, 3)).astype(bool)
-        task_caps[~task_caps.any(axis=1), 1] = True
-        args = (rng.uniform(0, 1, size=(n, m + 1)), robot_caps, rng.integers(1, 31, size=n).astype(float),
-                task_caps, np.clip(rng.poisson(10, size=m), 1, 30).astype(float))
+        _, *problem = random_matching_case(rng, n, m)
+        args = (rng.uniform(0, 1, size=(n, m + 1)), *problem)
         g, e = greedy_match(*args), exact_match(*args)
         equal += abs(g.reward - e.reward) < 1e-5
         ratios.append(g.reward / e.reward if e.reward > 0 else 1.0)

@@ -6,19 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lvws_ros.bench import random_matching_case
 from lvws_ros.matching import exact_match, feasibility_mask, greedy_match
 from lvws_ros.subteams import covers
-
-
-def random_case(rng, n, m, k=3):
-    robot_caps = rng.integers(0, 2, size=(n, k)).astype(bool)
-    robot_caps[~robot_caps.any(axis=1), 0] = True
-    task_caps = rng.integers(0, 2, size=(m, k)).astype(bool)
-    task_caps[~task_caps.any(axis=1), 1] = True
-    robot_payload = rng.integers(1, 31, size=n).astype(float)
-    task_payload = np.clip(rng.poisson(10, size=m), 1, 30).astype(float)
-    r = rng.normal(size=(n, m + 1))
-    return r, robot_caps, robot_payload, task_caps, task_payload
 
 
 def assert_valid(match, r, robot_caps, robot_payload, task_caps, task_payload):
@@ -35,7 +25,7 @@ def assert_valid(match, r, robot_caps, robot_payload, task_caps, task_payload):
 @pytest.mark.parametrize("seed", range(40))
 def test_greedy_obeys_constraints(seed):
     rng = np.random.default_rng(seed)
-    case = random_case(rng, int(rng.integers(1, 9)), int(rng.integers(1, 8)))
+    case = random_matching_case(rng, int(rng.integers(1, 9)), int(rng.integers(1, 8)))
     match = greedy_match(*case)
     assert_valid(match, *case)
     r = case[0]
@@ -48,7 +38,7 @@ def test_greedy_vs_exact_on_random_cases():
     equal = 0
     cases = 60
     for _ in range(cases):
-        case = random_case(rng, int(rng.integers(2, 7)), int(rng.integers(1, 6)))
+        case = random_matching_case(rng, int(rng.integers(2, 7)), int(rng.integers(1, 6)))
         g = greedy_match(*case)
         e = exact_match(*case, time_limit=10)
         assert_valid(e, *case)
