@@ -12,6 +12,7 @@ from __future__ import annotations
 import heapq
 import json
 import math
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -122,6 +123,7 @@ class Instance:
 
     @cached_property
     def topological_order(self) -> tuple[int, ...]:
+        """A canonical topological order (set by validation, which computes it anyway)."""
         order = _topological_order(self)
         assert order is not None  # validated in __post_init__
         return order
@@ -234,8 +236,10 @@ def validate_instance(inst: Instance) -> None:
             raise InstanceError(f"task {t.id!r} after: a task cannot be its own prerequisite")
         if len(set(t.after)) != len(t.after):
             raise InstanceError(f"task {t.id!r} after: duplicate prerequisite ids")
-    if _topological_order(inst) is None:
+    order = _topological_order(inst)
+    if order is None:
         raise InstanceError(f"cyclic prerequisites: {' -> '.join(_find_cycle(inst))} -> ...")
+    inst.__dict__["topological_order"] = order  # prime the cached_property
     team_caps = np.zeros(k, dtype=bool)
     for r in inst.robots:
         team_caps |= np.array(r.capabilities, dtype=bool)
@@ -257,8 +261,7 @@ def _no_duplicates(ids: Sequence[str], kind: str) -> None:
     for i in ids:
         if not isinstance(i, str) or not i:
             raise InstanceError(f"{kind} ids must be non-empty strings, got {i!r}")
-    seen: set[str] = set()
-    dups = sorted({i for i in ids if i in seen or seen.add(i)})  # type: ignore[func-returns-value]
+    dups = sorted(i for i, count in Counter(ids).items() if count > 1)
     if dups:
         raise InstanceError(f"duplicate {kind} id(s): {dups}")
 
