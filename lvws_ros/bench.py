@@ -1,8 +1,9 @@
-"""Benchmarks of the scheduling core (``make bench``); figures are printed, never asserted.
+"""Benchmarks (``make bench``); figures are printed, never asserted.
 
 * matching decision time (greedy, Eqs. 7-11) for N x M free robots x ready tasks;
 * the exact expert on Dataset I test instances: share proven optimal, solve times;
-* the baselines' suboptimality on the Dataset I test split beside the paper's figures.
+* the baselines' suboptimality on the Dataset I test split beside the paper's figures;
+* Fig. 5: LVWS decision rate and accumulated runtime for N robots x M tasks (PNG).
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ import os
 import platform
 import statistics
 import time
+from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -19,6 +22,7 @@ from lvws_ros.datasets import DATASETS, dataset_instance
 from lvws_ros.expert import solve_exact
 from lvws_ros.matching import exact_match, greedy_match
 from lvws_ros.metrics import run_policy, suboptimality
+from lvws_ros.policies import make_policy
 
 PAPER_TABLE_I = {"rand": 23.0, "rand_subteam": 11.8, "grp": 15.8}
 
@@ -104,10 +108,57 @@ def bench_baselines(count: int, seed: int, workers: int, time_limit: float) -> N
     print("| policy | ours: suboptimality % | paper: suboptimality % | valid % |")
     print("|---|---|---|---|")
     for policy in ("rand", "rand_subteam", "grp"):
-        runs = [run_policy(inst, policy, seed=0) for inst in instances]
+        pol = make_policy(policy, seed=0)
+        runs = [run_policy(inst, pol) for inst in instances]
         subs = [suboptimality(r.makespan, optimal[r.instance]) for r in runs if r.valid and r.instance in optimal]
         valid = 100 * sum(r.valid for r in runs) / len(runs)
         print(f"| {policy} | {statistics.fmean(subs):.2f} | {PAPER_TABLE_I[policy]:.2f} | {valid:.1f} |")
+
+
+def bench_fig5(model_path: str | None, seed: int, out_png: str, sizes_n: Sequence[int] = (25, 50, 100),
+               sizes_m: Sequence[int] = (50, 100, 200, 500)) -> None:
+    """Fig. 5 of the paper: LVWS decision rate (Hz) and accumulated runtime of a whole
+    schedule (s) for N robots x M tasks, plus a PNG of both."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import torch
+
+    from lvws_ros.datasets import random_instance
+    from lvws_ros.executor import simulate
+    from lvws_ros.lvws_policy import LVWSPolicy
+
+    policy = LVWSPolicy(model_path=model_path)
+    print(f"\n## Fig. 5: LVWS decision rate and accumulated runtime (seed {seed}, {torch.get_num_threads()} torch threads)")
+    print("| N | M | decisions | decision rate Hz | accumulated runtime s | makespan |")
+    print("|---|---|---|---|---|---|")
+    rate: dict[int, list[float]] = {}
+    total: dict[int, list[float]] = {}
+    for n in sizes_n:
+        for m in sizes_m:
+            inst = random_instance(np.random.default_rng([seed, n, m]), n, m, f"{n}r-{m}t", num_capabilities=3)
+            sched = simulate(inst, policy).schedule
+            hz = sched.decisions / sched.compute_seconds
+            rate.setdefault(n, []).append(hz)
+            total.setdefault(n, []).append(sched.compute_seconds)
+            print(f"| {n} | {m} | {sched.decisions} | {hz:.2f} | {sched.compute_seconds:.2f} | {sched.makespan:g} |",
+                  flush=True)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    for n in sizes_n:
+        ax1.plot(sizes_m, rate[n], marker="o", label=f"N = {n}")
+        ax2.plot(sizes_m, total[n], marker="o", label=f"N = {n}")
+    ax1.set(xlabel="number of tasks M", ylabel="decision rate [Hz]", yscale="log", title="execution speed")
+    ax2.set(xlabel="number of tasks M", ylabel="accumulated runtime [s]", title="accumulated runtime")
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+    fig.suptitle(f"LVWS on {machine()}")
+    fig.tight_layout()
+    Path(out_png).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_png, dpi=120)
+    plt.close(fig)
+    print(f"plot: {out_png}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,12 +170,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline-count", type=int, default=200)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--time-limit", type=float, default=60.0)
+    parser.add_argument("--model", default=None, help="LVWS checkpoint for Fig. 5 (default: the shipped one)")
+    parser.add_argument("--fig5-png", default="docs/fig5.png")
+    parser.add_argument("--only", choices=["core", "fig5"], default=None)
     args = parser.parse_args(argv)
-    print(f"# lvws_ros core benchmarks — {machine()}")
-    bench_matching(args.repeats, args.seed)
-    bench_greedy_vs_exact(200, args.seed)
-    bench_expert(args.expert_count, args.workers, args.time_limit, args.seed)
-    bench_baselines(args.baseline_count, args.seed, args.workers, args.time_limit)
+    print(f"# lvws_ros benchmarks — {machine()}")
+    if args.only in (None, "core"):
+        bench_matching(args.repeats, args.seed)
+        bench_greedy_vs_exact(200, args.seed)
+        bench_expert(args.expert_count, args.workers, args.time_limit, args.seed)
+        bench_baselines(args.baseline_count, args.seed, args.workers, args.time_limit)
+    if args.only in (None, "fig5"):
+        bench_fig5(args.model, args.seed, args.fig5_png)
     return 0
 
 

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from lvws_ros.features import ROBOT_FEATURES, TASK_FEATURES, GraphFeatures
+from lvws_ros.features import PAIR_FEATURES, ROBOT_FEATURES, TASK_FEATURES, GraphFeatures
 
 NEG = -1e9
 
@@ -150,6 +150,7 @@ class GATN(nn.Module):
         self.psi_r = nn.Linear(d, self.cfg.mlp_hidden)
         self.psi_t = nn.Linear(d, self.cfg.mlp_hidden, bias=False)
         self.psi_g = nn.Linear(2 * d, self.cfg.mlp_hidden, bias=False)
+        self.psi_p = nn.Linear(PAIR_FEATURES, self.cfg.mlp_hidden, bias=False)  # our pair features
         self.psi_out = nn.Sequential(nn.ReLU(), nn.Linear(self.cfg.mlp_hidden, self.cfg.mlp_hidden), nn.ReLU(),
                                      nn.Linear(self.cfg.mlp_hidden, 1))
 
@@ -159,7 +160,7 @@ class GATN(nn.Module):
         g_r, h_r = self.robot_encoder(batch.robots, full, batch.robot_mask)
         g_t, h_t = self.task_encoder(batch.tasks, batch.task_adjacency, batch.task_mask)
         z = (self.psi_r(h_r).unsqueeze(2) + self.psi_t(h_t).unsqueeze(1)
-             + self.psi_g(torch.cat([g_r, g_t], dim=-1))[:, None, None, :])
+             + self.psi_g(torch.cat([g_r, g_t], dim=-1))[:, None, None, :] + self.psi_p(batch.pairs))
         return self.psi_out(z).squeeze(-1)
 
 
@@ -171,6 +172,7 @@ class Batch:
     task_mask: Tensor  # (B, M+1)
     task_adjacency: Tensor  # (B, M+1, M+1)
     idle_index: Tensor  # (B,) column of each graph's idle task
+    pairs: Tensor  # (B, N, M+1, PAIR_FEATURES)
 
     def reward_mask(self) -> Tensor:
         """(B, N, M+1): real robot x real task (or idle) entries."""
@@ -189,22 +191,41 @@ def collate(graphs: Sequence[GraphFeatures]) -> Batch:
     tmask = np.zeros((bsz, m1), bool)
     adj = np.zeros((bsz, m1, m1), bool)
     idle = np.zeros(bsz, np.int64)
+    pairs = np.zeros((bsz, n, m1, PAIR_FEATURES), np.float32)
     for k, g in enumerate(graphs):
         nr, nt = g.robots.shape[0], g.tasks.shape[0]
         robots[k, :nr], rmask[k, :nr] = g.robots, True
         tasks[k, :nt], tmask[k, :nt] = g.tasks, True
         adj[k, :nt, :nt] = g.task_adjacency
         idle[k] = nt - 1
+        pairs[k, :nr, :nt] = g.pairs
     return Batch(torch.from_numpy(robots), torch.from_numpy(rmask), torch.from_numpy(tasks),
-                 torch.from_numpy(tmask), torch.from_numpy(adj), torch.from_numpy(idle))
+                 torch.from_numpy(tmask), torch.from_numpy(adj), torch.from_numpy(idle), torch.from_numpy(pairs))
 
 
-def imitation_loss(r: Tensor, e: Tensor, x: Tensor, valid: Tensor, lam: float) -> Tensor:
+def imitation_loss(r: Tensor, e: Tensor, x: Tensor, valid: Tensor, lam: float,
+                   choice_weight: float = 0.0, temperature: float = 0.1) -> Tensor:
     """Eq. 12: ||(R - E) o X||_1 + lambda ||R - E||_1, averaged over the real entries
-    (``valid``) so that batches of different sizes weigh alike."""
+    (``valid``) so that batches of different sizes weigh alike.
+
+    With ``choice_weight`` > 0 (our addition, beyond the paper) a per-robot choice term
+    is added: for each robot with feasible options (a row of X with a 1), the cross
+    entropy of softmax(R / temperature) over those options against the expert's choice
+    (the argmax of E in the row). Eq. 12 alone regresses a sparse E under L1 norms, whose
+    minimiser is close to 0 everywhere; the choice term keeps the ranking that the
+    greedy matching reads.
+    """
     diff = (r - e).abs() * valid
     count = valid.sum().clamp(min=1)
-    return (diff * x).sum() / count + lam * diff.sum() / count
+    loss = (diff * x).sum() / count + lam * diff.sum() / count
+    if choice_weight > 0:
+        rows = x.sum(-1) > 0
+        if rows.any():
+            logits = (r / temperature).masked_fill(x <= 0, NEG)
+            target = torch.where(x > 0, e, torch.full_like(e, -1.0)).argmax(-1)
+            ce = nn.functional.cross_entropy(logits[rows], target[rows])
+            loss = loss + choice_weight * ce
+    return loss
 
 
 def reward_matrix(model: GATN, features: GraphFeatures) -> np.ndarray:

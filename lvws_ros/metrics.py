@@ -12,10 +12,9 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from lvws_ros.executor import PolicyError, simulate
+from lvws_ros.executor import Policy, PolicyError, simulate
 from lvws_ros.expert import ExpertResult, solve_exact
 from lvws_ros.model import Instance
-from lvws_ros.policies import make_policy
 from lvws_ros.schedule import check_schedule
 
 
@@ -81,13 +80,15 @@ def expert_records(instances: Sequence[Instance], cache: Path | None, time_limit
     return known
 
 
-def run_policy(inst: Instance, policy: str, seed: int, **options: object) -> RunRecord:
+def run_policy(inst: Instance, policy: Policy) -> RunRecord:
+    """One run, checked against the rules of formats.md; a policy error is an invalid run.
+    The policy object is reused across instances (``reset`` restores its seed)."""
     try:
-        res = simulate(inst, make_policy(policy, seed=seed, **options))
+        res = simulate(inst, policy)
     except PolicyError as exc:
-        return RunRecord(inst.name, policy, False, math.nan, 0, 0.0, str(exc))
+        return RunRecord(inst.name, policy.name, False, math.nan, 0, 0.0, str(exc))
     problems = check_schedule(inst, res.schedule)
-    return RunRecord(inst.name, policy, not problems, res.schedule.makespan, res.schedule.decisions,
+    return RunRecord(inst.name, policy.name, not problems, res.schedule.makespan, res.schedule.decisions,
                      res.schedule.compute_seconds, "; ".join(map(str, problems)))
 
 

@@ -23,6 +23,9 @@ import numpy as np
 import numpy.typing as npt
 
 INSTANCE_FORMAT = "lvws-instance/1"
+# A capability named "@<site>" is a location: robots there hold it, tasks there need it.
+# The matching enforces it like any capability; the network's node features leave it out.
+SITE_PREFIX = "@"
 
 BoolArray = npt.NDArray[np.bool_]
 FloatArray = npt.NDArray[np.float64]
@@ -89,6 +92,11 @@ class Instance:
         return _caps_matrix([t.capabilities for t in self.tasks], len(self.capabilities))
 
     @cached_property
+    def skill_columns(self) -> tuple[int, ...]:
+        """Capability columns that are skills, not sites (see SITE_PREFIX)."""
+        return tuple(k for k, name in enumerate(self.capabilities) if not name.startswith(SITE_PREFIX))
+
+    @cached_property
     def robot_payload(self) -> FloatArray:
         return np.array([r.payload for r in self.robots], dtype=np.float64)
 
@@ -120,6 +128,24 @@ class Instance:
         for j, pre in enumerate(self.prerequisites):
             p[list(pre), j] = True
         return p
+
+    @cached_property
+    def critical_tail(self) -> FloatArray:
+        """Longest duration path from each task to the end of the DAG, its own duration included."""
+        tail = self.durations.copy()
+        for j in reversed(self.topological_order):
+            if self.successors[j]:
+                tail[j] += max(tail[s] for s in self.successors[j])
+        return tail
+
+    @cached_property
+    def descendant_count(self) -> npt.NDArray[np.int64]:
+        """How many tasks depend on each task, directly or not."""
+        reach = self.precedence_matrix.copy()
+        for j in reversed(self.topological_order):
+            for s in self.successors[j]:
+                reach[j] |= reach[s]
+        return reach.sum(axis=1).astype(np.int64)
 
     @cached_property
     def topological_order(self) -> tuple[int, ...]:

@@ -105,7 +105,10 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
 
         return ExactPolicy(seed=seed, **options)
     if name in ("lvws", "dbgm"):
-        raise ValueError(f"policy {name!r} needs the learned model, which is not available in this version")
+        from lvws_ros.lvws_policy import DBGMPolicy, LVWSPolicy
+
+        model_path = options.get("model_path") or None
+        return LVWSPolicy(model_path=model_path) if name == "lvws" else DBGMPolicy(model_path=model_path)
     if name not in factories:
         raise ValueError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")
     return factories[name]()

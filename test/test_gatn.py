@@ -42,7 +42,8 @@ def test_permutation_equivariance(model):
     rng = np.random.default_rng(0)
     pr = rng.permutation(n)
     pt = np.append(rng.permutation(m), m)  # the idle task stays last
-    permuted = GraphFeatures(feats.robots[pr], feats.tasks[pt], feats.task_adjacency[np.ix_(pt, pt)])
+    permuted = GraphFeatures(feats.robots[pr], feats.tasks[pt], feats.task_adjacency[np.ix_(pt, pt)],
+                             feats.pairs[np.ix_(pr, pt)])
     r = reward_matrix(model, feats)
     rp = reward_matrix(model, permuted)
     np.testing.assert_allclose(rp, r[np.ix_(pr, pt)], rtol=1e-4, atol=1e-5)

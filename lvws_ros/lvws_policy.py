@@ -1,0 +1,122 @@
+"""Learned policies: LVWS (GATN rewards + subteam matching with waiting) and DBGM-style.
+
+* ``lvws``: one GATN forward pass per decision step gives R (N x (M+1)); the rows of
+  free robots and the columns of ready tasks plus the idle task go to
+  :func:`~lvws_ros.matching.greedy_match` (Eqs. 7-11). Robots matched to the idle task
+  wait. The idle column gets the checkpoint's ``idle_bias``, calibrated on held-out
+  training instances (NO_VOLUNTARY_WAIT: robots wait only when no ready task needs
+  them). Safety net: if every free robot chose to wait while nothing is running (which
+  would stall the schedule), the matching is redone without the idle task.
+* ``dbgm``: a GAT-only network (no transformer, no global context), no idle task, and
+  subteams only when no single free robot can do a task: one-to-one matching by reward
+  first, then subteams for the tasks left that need them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from lvws_ros.executor import Decision, State, TaskStatus
+from lvws_ros.features import encode_state, pair_features
+from lvws_ros.gatn import GATN, GATNConfig, reward_matrix
+from lvws_ros.matching import greedy_match
+from lvws_ros.model import Instance
+from lvws_ros.subteams import covers
+
+MODEL_DIR = Path(__file__).resolve().parent / "models"
+DEFAULT_MODELS = {"lvws": MODEL_DIR / "lvws.pt", "dbgm": MODEL_DIR / "dbgm.pt"}
+CHECKPOINT_FORMAT = "lvws-model/1"
+NO_VOLUNTARY_WAIT = -1e6  # idle bias that leaves waiting only to robots with nothing to do
+
+
+def load_checkpoint(path: str | Path) -> tuple[GATN, dict[str, Any]]:
+    """A model and its metadata (training config, seeds, data) from a checkpoint file."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"model checkpoint not found: {p}")
+    data = torch.load(p, map_location="cpu", weights_only=False)
+    if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{p}: not an {CHECKPOINT_FORMAT} checkpoint")
+    model = GATN(GATNConfig(**data["config"]))
+    model.load_state_dict(data["state_dict"])
+    model.eval()
+    return model, data.get("meta", {})
+
+
+class LVWSPolicy:
+    name = "lvws"
+
+    def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
+                 idle_bias: float | None = None) -> None:
+        if model is None:
+            model, meta = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["lvws"])
+            idle_bias = float(meta.get("idle_bias", 0.0)) if idle_bias is None else idle_bias
+        self.model = model.eval()
+        self.idle_bias = 0.0 if idle_bias is None else idle_bias
+        self._pairs: tuple[Instance, np.ndarray] | None = None
+
+    def reset(self, instance: Instance) -> None:
+        self._pairs = (instance, pair_features(instance))
+
+    def decide(self, state: State) -> Decision:
+        inst = state.instance
+        free, ready = state.free_robots(), state.ready_tasks()
+        if not free or not ready:
+            return Decision((), tuple(free))
+        if self._pairs is None or self._pairs[0] is not inst:
+            self.reset(inst)
+        assert self._pairs is not None
+        r = reward_matrix(self.model, encode_state(state, self._pairs[1]))
+        sub = r[np.ix_(free, [*ready, inst.num_tasks])]
+        sub[:, -1] += self.idle_bias
+        args = (inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[ready], inst.task_payload[ready])
+        match = greedy_match(sub, *args)
+        if not match.teams and not (state.task_status == TaskStatus.ASSIGNED).any():
+            sub[:, -1] = NO_VOLUNTARY_WAIT  # waiting now would stall: take the best task instead
+            match = greedy_match(sub, *args)
+        assignments = tuple((ready[j], tuple(free[i] for i in team)) for j, team in sorted(match.teams.items()))
+        return Decision(assignments, tuple(free[i] for i in match.waiting))
+
+
+class DBGMPolicy:
+    name = "dbgm"
+
+    def __init__(self, model: GATN | None = None, model_path: str | Path | None = None) -> None:
+        if model is None:
+            model = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["dbgm"])[0]
+        self.model = model.eval()
+
+    def reset(self, instance: Instance) -> None:
+        pass
+
+    def decide(self, state: State) -> Decision:
+        inst = state.instance
+        free, ready = state.free_robots(), state.ready_tasks()
+        if not free or not ready:
+            return Decision((), tuple(free))
+        r = reward_matrix(self.model, encode_state(state))
+        out: list[tuple[int, tuple[int, ...]]] = []
+        pairs = [(r[i, j], i, j) for i in free for j in ready
+                 if covers(inst.robot_caps[[i]], inst.robot_payload[[i]], inst.task_caps[j], inst.tasks[j].payload)]
+        used_r: set[int] = set()
+        used_t: set[int] = set()
+        for _, i, j in sorted(pairs, key=lambda p: -p[0]):  # one-to-one bipartite matching, best first
+            if i not in used_r and j not in used_t:
+                out.append((j, (i,)))
+                used_r.add(i)
+                used_t.add(j)
+        rest_r = [i for i in free if i not in used_r]
+        single = {j for _, _, j in pairs}
+        rest_t = [j for j in ready if j not in used_t and j not in single]  # need a subteam
+        if rest_r and rest_t:
+            sub = r[np.ix_(rest_r, rest_t)]
+            sub = np.concatenate([sub, np.full((len(rest_r), 1), NO_VOLUNTARY_WAIT)], axis=1)  # no idle task
+            match = greedy_match(sub, inst.robot_caps[rest_r], inst.robot_payload[rest_r],
+                                 inst.task_caps[rest_t], inst.task_payload[rest_t])
+            out += [(rest_t[j], tuple(rest_r[i] for i in team)) for j, team in match.teams.items()]
+            used_r |= {rest_r[i] for team in match.teams.values() for i in team}
+        return Decision(tuple(out), tuple(i for i in free if i not in used_r))
