@@ -55,6 +55,11 @@ msgs: $(VENV)/.stamp-msgs
 test: env lint
 	$(PY) -m pytest -q test
 
+# The paper's case study end to end: cell_sim + scheduler (default policy, the shipped
+# LVWS model) + recorder; the bag lands in bags/, Gantt PNG, GIF and logs in out/.
+demo: env
+	$(PY) -m lvws_ros.cli launch --bag-dir bags --out-dir out
+
 # Benchmarks print figures (with the machine); they assert nothing and are not in `make test`.
 bench: env
 	$(PY) -m lvws_ros.bench

@@ -161,6 +161,79 @@ def bench_fig5(model_path: str | None, seed: int, out_png: str, sizes_n: Sequenc
     print(f"plot: {out_png}")
 
 
+def bench_runtime(policy: str = "lvws", rate: float = 20.0, flood: int = 5000) -> None:
+    """The ROS runtime: wall time of the whole demo, the simulator's real-time factor,
+    decision latency p50/p99 read from the bag, and recorder throughput without loss."""
+    import tempfile
+
+    from lvws_ros.launcher import launch
+
+    print(f"\n## ROS runtime (case study, policy {policy}, requested rate {rate:g}x)")
+    with tempfile.TemporaryDirectory() as tmp:
+        res = launch(policy=policy, rate=rate, bag_dir=Path(tmp) / "bags", out_dir=Path(tmp) / "out", name="bench",
+                     gif=False, log=lambda _t: None)
+        from lvws_ros.report import report
+
+        rep = report(res.bag)
+        s = res.summary
+        print("| figure | value |\n|---|---|")
+        print(f"| demo wall time (launch to summary) | {s['wall_seconds_total']:.1f} s |")
+        print(f"| makespan (sim time) | {s['makespan']:.2f} s |")
+        print(f"| simulator real-time factor (sim s / wall s, paused at decisions included) | "
+              f"{s['sim_time'] / s['wall_seconds']:.1f}x |")
+        print(f"| decision latency p50 / p99 (from the bag) | {rep.latency_ms_p50:.2f} / {rep.latency_ms_p99:.2f} ms |")
+        print(f"| messages in the bag | {sum(rep.topics.values())} |")
+    for hz in (500, 1000, 2000, 4000):
+        with tempfile.TemporaryDirectory() as tmp:
+            sent, got, seconds = _flood_recorder(Path(tmp) / "flood", hz, 2.0)
+        print(f"| recorder at {hz} TeamState msg/s offered ({sent} sent in {seconds:.2f} s) | {got} recorded, "
+              f"{'no loss' if got == sent else f'{sent - got} lost'} |")
+
+
+def _flood_recorder(bag: Path, hz: int, seconds: float) -> tuple[int, int, float]:
+    import copy
+    import signal
+    import subprocess
+    import sys
+
+    import rclpy
+    from lvws_msgs.msg import RobotState, TeamState
+
+    from lvws_ros.bag import read_run
+    from lvws_ros.ros.common import TEAM_QOS
+
+    rec = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag)], stdout=subprocess.PIPE,
+                           text=True)
+    assert rec.stdout is not None
+    rec.stdout.readline()
+    rclpy.init()
+    node = rclpy.create_node("lvws_bench_flood")
+    count = int(hz * seconds)
+    qos = copy.copy(TEAM_QOS)
+    qos.depth = count  # the publisher keeps every sample until the recorder acknowledges it
+    pub = node.create_publisher(TeamState, "/lvws/team_state", qos)
+    while pub.get_subscription_count() == 0:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    time.sleep(0.5)
+    msg = TeamState(capability_names=["a", "b"], robots=[
+        RobotState(id=f"r{k}", kind="jackal", capabilities=[1, 0], payload=2.0) for k in range(6)])
+    t0 = time.perf_counter()
+    for k in range(count):
+        msg.header.stamp.sec = k
+        pub.publish(msg)
+        delay = t0 + (k + 1) / hz - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+    took = time.perf_counter() - t0
+    pub.wait_for_all_acked(rclpy.duration.Duration(seconds=10))
+    time.sleep(2.0)  # let the recorder write what it holds
+    rec.send_signal(signal.SIGINT)
+    rec.communicate(timeout=60)
+    node.destroy_node()
+    rclpy.shutdown()
+    return count, len(read_run(bag).teams), took
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m lvws_ros.bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -172,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-limit", type=float, default=60.0)
     parser.add_argument("--model", default=None, help="LVWS checkpoint for Fig. 5 (default: the shipped one)")
     parser.add_argument("--fig5-png", default="docs/fig5.png")
-    parser.add_argument("--only", choices=["core", "fig5"], default=None)
+    parser.add_argument("--only", choices=["core", "fig5", "runtime"], default=None)
     args = parser.parse_args(argv)
     print(f"# lvws_ros benchmarks — {machine()}")
     if args.only in (None, "core"):
@@ -182,6 +255,8 @@ def main(argv: list[str] | None = None) -> int:
         bench_baselines(args.baseline_count, args.seed, args.workers, args.time_limit)
     if args.only in (None, "fig5"):
         bench_fig5(args.model, args.seed, args.fig5_png)
+    if args.only in (None, "runtime"):
+        bench_runtime()
     return 0
 
 

@@ -279,8 +279,14 @@ class ExactPolicy:
         self.result = None
         self._plan = {}
 
+    def _expected(self, t: float) -> bool:
+        """Whether ``t`` is a start or end time of the plan (always so in the executor)."""
+        return any(abs(a.start - t) <= MATCH_TOL or abs(a.end - t) <= MATCH_TOL for a in self._plan.values())
+
     def decide(self, state: State) -> Decision:
         inst = state.instance
+        if self.result is not None and not self._expected(state.time):
+            self.result = None  # the world deviated from the plan (online use): re-solve from here
         if self.result is None:
             self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed)
             assert self.result.schedule is not None
