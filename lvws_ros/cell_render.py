@@ -76,3 +76,17 @@ def render_gif(cfg: CellConfig, frames: Sequence[Frame], total_tasks: int, path:
     anim.save(str(out), writer=PillowWriter(fps=fps))
     plt.close(fig)
     return out
+
+
+def render_frames(cfg: CellConfig, frames: Sequence[Frame], total_tasks: int, folder: str | Path) -> list[Path]:
+    """One PNG per recorded frame: frame_0000.png, frame_0001.png, ..."""
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(5, 4.5), dpi=100)
+    paths = []
+    for k, frame in enumerate(frames):
+        draw_frame(ax, cfg, frame, total_tasks)
+        paths.append(out / f"frame_{k:04d}.png")
+        fig.savefig(paths[-1])
+    plt.close(fig)
+    return paths

@@ -39,14 +39,14 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     from lvws_ros.executor import simulate
-    from lvws_ros.policies import make_policy
+    from lvws_ros.policies import LEARNED_POLICIES, make_policy
     from lvws_ros.schedule import save_schedule, schedule_to_dict
 
     inst = load_instance(args.instance)
     options: dict[str, object] = {}
     if args.policy == "exact":
         options = {"time_limit": args.time_limit, "workers": args.workers}
-    elif args.policy in ("lvws", "dbgm"):
+    elif args.policy in LEARNED_POLICIES:
         options = {"model_path": args.model}
     policy = make_policy(args.policy, seed=args.seed, **options)
     result = simulate(inst, policy)
@@ -149,13 +149,13 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_sim(args: argparse.Namespace) -> int:
     from lvws_ros.cell_sim import CellSim, load_cell_config, run_offline
-    from lvws_ros.policies import make_policy
+    from lvws_ros.policies import LEARNED_POLICIES, make_policy
     from lvws_ros.schedule import check_schedule, save_schedule
 
     sim = CellSim(load_cell_config(args.config))
-    options = {"model_path": args.model} if args.model and args.policy in ("lvws", "dbgm") else {}
+    options = {"model_path": args.model} if args.model and args.policy in LEARNED_POLICIES else {}
     sched, decisions = run_offline(sim, make_policy(args.policy, seed=args.seed, **options),
-                                   frame_every=args.frame_every if args.gif else None)
+                                   frame_every=args.frame_every if args.gif or args.frames else None)
     problems = check_schedule(sim.executed_instance(), sched)
     print(f"{args.policy}: makespan {sched.makespan:.2f} s, {len(decisions)} decisions, "
           f"valid: {'yes' if not problems else problems}")
@@ -168,6 +168,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
         from lvws_ros.cell_render import render_gif
 
         print(render_gif(sim.cfg, sim.trace, sim.inst.num_tasks, args.gif))
+    if args.frames:
+        from lvws_ros.cell_render import render_frames
+
+        paths = render_frames(sim.cfg, sim.trace, sim.inst.num_tasks, args.frames)
+        print(f"{len(paths)} PNG frames in {args.frames}")
     return 0 if not problems else 1
 
 
@@ -307,7 +312,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", default=None, help="assembly-cell YAML (default: config/assembly_cell.yaml)")
     p.add_argument("--out", help="write the executed schedule (lvws-schedule/1) here")
     p.add_argument("--gif", help="write an animated GIF of the run here")
-    p.add_argument("--frame-every", type=float, default=2.0, help="sim seconds between GIF frames")
+    p.add_argument("--frames", help="write a PNG per frame into this folder")
+    p.add_argument("--frame-every", type=float, default=2.0, help="sim seconds between frames")
 
     p = add("launch", cmd_launch, "the case study on ROS 2: cell_sim + scheduler + recorder, then a summary")
     p.add_argument("--policy", choices=POLICY_NAMES, default="lvws")

@@ -14,13 +14,14 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from lvws_ros.executor import Decision, State, TaskStatus
+from lvws_ros.executor import Decision, Policy, State, TaskStatus, simulate
 from lvws_ros.features import encode_state, pair_features
 from lvws_ros.gatn import GATN, GATNConfig, reward_matrix
 from lvws_ros.matching import greedy_match
@@ -120,3 +121,67 @@ class DBGMPolicy:
             out += [(rest_t[j], tuple(rest_r[i] for i in team)) for j, team in match.teams.items()]
             used_r |= {rest_r[i] for team in match.teams.values() for i in team}
         return Decision(tuple(out), tuple(i for i in free if i not in used_r))
+
+
+def continue_after(state: State, decision: Decision, policy: Policy) -> float:
+    """Makespan when ``decision`` is taken in ``state`` and ``policy`` runs the rest
+    (inf if the decision would stall the schedule)."""
+    s = state.copy()
+    for task, team in decision.assignments:
+        s.start(task, team)
+    nxt = s.next_event_time()
+    if nxt is None:
+        return math.inf
+    s.time, s.step = nxt, s.step + 1
+    s.refresh()
+    if s.done():
+        return float(np.nanmax(s.task_end))
+    return float(simulate(state.instance, policy, state=s).schedule.makespan)
+
+
+class LVWSRolloutPolicy:
+    """LVWS with one-step rollout (beyond the paper): at each decision step the
+    candidates are LVWS's matching, the matchings with the learned idle column at
+    ``wait_biases`` (voluntary waiting as the network proposes it) and GRP's; each is
+    scored by letting LVWS finish the schedule from there, and the shortest wins (LVWS's
+    own on ties). A rollout is never worse than LVWS alone on the executor's model,
+    at the price of one simulated schedule per distinct candidate and step."""
+
+    name = "lvws_rollout"
+
+    def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
+                 wait_biases: tuple[float, ...] = (-0.2, -0.1, 0.0), hold_back: bool = False) -> None:
+        self.hold_back = hold_back
+        if model is None:
+            model, meta = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["lvws"])
+            base_bias = float(meta.get("idle_bias", NO_VOLUNTARY_WAIT))
+        else:
+            base_bias = NO_VOLUNTARY_WAIT
+        self.base = LVWSPolicy(model=model, idle_bias=base_bias)
+        self.waiting = [LVWSPolicy(model=model, idle_bias=b) for b in wait_biases]
+        from lvws_ros.policies import GreedyPayloadPolicy
+
+        self.grp = GreedyPayloadPolicy()
+
+    def reset(self, instance: Instance) -> None:
+        for p in self._all():
+            p.reset(instance)
+
+    def _all(self) -> list[Policy]:
+        return [self.base, *self.waiting, self.grp]
+
+    def decide(self, state: State) -> Decision:
+        first = self.base.decide(state)
+        candidates = [first]
+        proposals = [p.decide(state) for p in self._all()[1:]]
+        if self.hold_back and len(first.assignments) > 1:  # each subteam told to wait instead
+            proposals += [Decision(tuple(a for a in first.assignments if a != held),
+                                   tuple(sorted({*first.waiting, *held[1]}))) for held in first.assignments]
+        for d in proposals:
+            if all(set(d.assignments) != set(c.assignments) for c in candidates):
+                candidates.append(d)
+        if len(candidates) == 1:
+            return first
+        scores = [continue_after(state, d, self.base) for d in candidates]
+        self.base.reset(state.instance)  # simulate() reset it; keep the pair cache valid
+        return candidates[int(np.argmin(scores))]

@@ -23,7 +23,8 @@ from lvws_ros.executor import Decision, Policy, State
 from lvws_ros.model import Instance
 from lvws_ros.subteams import team_candidates
 
-POLICY_NAMES = ("lvws", "dbgm", "grp", "rand", "rand_subteam", "exact")
+POLICY_NAMES = ("lvws", "lvws_rollout", "dbgm", "grp", "rand", "rand_subteam", "exact")
+LEARNED_POLICIES = ("lvws", "lvws_rollout", "dbgm")  # take a model_path
 
 
 def candidate_teams(state: State, task: int, free: list[int]) -> list[tuple[int, ...]]:
@@ -104,10 +105,12 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
         from lvws_ros.expert import ExactPolicy
 
         return ExactPolicy(seed=seed, **options)
-    if name in ("lvws", "dbgm"):
-        from lvws_ros.lvws_policy import DBGMPolicy, LVWSPolicy
+    if name in ("lvws", "lvws_rollout", "dbgm"):
+        from lvws_ros.lvws_policy import DBGMPolicy, LVWSPolicy, LVWSRolloutPolicy
 
         model_path = options.get("model_path") or None
+        if name == "lvws_rollout":
+            return LVWSRolloutPolicy(model_path=model_path, hold_back=True)
         return LVWSPolicy(model_path=model_path) if name == "lvws" else DBGMPolicy(model_path=model_path)
     if name not in factories:
         raise ValueError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")

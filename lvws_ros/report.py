@@ -18,7 +18,7 @@ import numpy as np
 from lvws_ros.bag import BagError, Run, read_run
 from lvws_ros.model import Instance, Robot, Task
 from lvws_ros.online import GraphSnapshot, OnlineScheduler, TeamSnapshot, build_instance, build_state
-from lvws_ros.policies import make_policy
+from lvws_ros.policies import LEARNED_POLICIES, make_policy
 from lvws_ros.schedule import Assignment, Schedule, Violation, check_schedule
 
 DONE = 3
@@ -112,7 +112,7 @@ def verify(bag: str | Path, *, policy: str | None = None, seed: int = 0, model_p
     if not run.decisions:
         raise BagError(f"{run.path}: no decisions recorded on /lvws/assignments")
     name = policy or run.decisions[0].policy
-    options = {"model_path": model_path} if name in ("lvws", "dbgm") and model_path else {}
+    options = {"model_path": model_path} if name in LEARNED_POLICIES and model_path else {}
     online = OnlineScheduler(make_policy(name, seed=seed, **options), ack_timeout)
     # A stamp names the first snapshot taken at that instant: a paused (sync) simulator
     # republishes at the same sim time once it has executed the decision.

@@ -180,3 +180,16 @@ def test_malformed_yaml(tmp_path):
     p.write_text("cells: [unclosed\n")
     with pytest.raises(CellConfigError, match="malformed YAML"):
         load_cell_config(p)
+
+
+def test_lvws_sim_command_writes_schedule_and_frames(tmp_path):
+    from lvws_ros.cli import main
+    from lvws_ros.schedule import load_schedule
+
+    code = main(["sim", "--policy", "grp", "--out", str(tmp_path / "s.json"), "--frames", str(tmp_path / "f"),
+                 "--frame-every", "20"])
+    assert code == 0
+    sched = load_schedule(tmp_path / "s.json")
+    assert len(sched.assignments) == 14
+    frames = sorted((tmp_path / "f").glob("frame_*.png"))
+    assert len(frames) >= sched.makespan / 20 and frames[0].read_bytes()[:4] == b"\x89PNG"

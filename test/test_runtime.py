@@ -170,9 +170,11 @@ def _graph(stamp: int) -> TaskGraph:
     return msg
 
 
-def test_the_scheduler_node_obeys_capability_payload_and_availability(ros_context):
+def test_the_scheduler_node_obeys_capability_payload_and_availability(ros_context, tmp_path):
+    params = tmp_path / "scheduler.yaml"
+    params.write_text((REPO / "config" / "scheduler.yaml").read_text().replace("policy: lvws", "policy: dbgm"))
     proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args",
-                             "-p", "policy:=lvws", "-p", "seed:=3"],
+                             "--params-file", str(params), "-p", "seed:=3"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     node = rclpy.create_node("lvws_sched_test", context=ros_context)
     executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
@@ -206,7 +208,7 @@ def test_the_scheduler_node_obeys_capability_payload_and_availability(ros_contex
         node.destroy_node()
     assert len(got) == 1, (got, out)
     msg = got[0]
-    assert msg.policy == "lvws" and msg.decision_step == 0
+    assert msg.policy == "dbgm" and msg.decision_step == 0  # from the params file
     caps = {r[0]: r[1] for r in robots}
     payload = {r[0]: r[2] for r in robots}
     need = {"t0": ([1, 1], 5.0), "t1": ([0, 1], 1.0)}

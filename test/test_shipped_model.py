@@ -58,3 +58,17 @@ def test_shipped_lvws_within_bound_of_the_expert():
     print(f"shipped LVWS on the fixed set: {mean:.2f} % (GRP {statistics.fmean(grp_subs):.2f} %)")
     assert mean <= SHIPPED_BOUND_PERCENT
     assert mean < statistics.fmean(grp_subs)
+
+
+def test_rollout_is_valid_and_never_worse_than_lvws():
+    """One-step rollout over LVWS's own decision keeps LVWS's continuation as a candidate,
+    and LVWS is a Markov policy, so the rollout can only shorten the schedule."""
+    lvws, roll = make_policy("lvws"), make_policy("lvws_rollout")
+    better = 0
+    for k in range(8):
+        inst = dataset_instance(DATASETS["I"], k, seed=FIXED_SEED)
+        a, b = simulate(inst, lvws).schedule, simulate(inst, roll).schedule
+        assert check_schedule(inst, b) == []
+        assert b.makespan <= a.makespan + 1e-9, inst.name
+        better += b.makespan < a.makespan - 1e-9
+    print(f"rollout shorter on {better}/8")

@@ -36,12 +36,13 @@ def build_parser() -> argparse.ArgumentParser:
 def make_node() -> Any:
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
+    from rclpy.clock import Clock, ClockType
     from rclpy.node import Node
 
     from lvws_ros.executor import PolicyError
     from lvws_ros.model import InstanceError
     from lvws_ros.online import OnlineScheduler
-    from lvws_ros.policies import POLICY_NAMES, make_policy
+    from lvws_ros.policies import LEARNED_POLICIES, POLICY_NAMES, make_policy
     from lvws_ros.ros import common
 
     class SchedulerNode(Node):
@@ -53,14 +54,16 @@ def make_node() -> Any:
             ack_timeout = float(self.declare_parameter("ack_timeout", 5.0).value)
             if self.policy_name not in POLICY_NAMES:
                 raise ValueError(f"parameter policy: unknown {self.policy_name!r}; one of {', '.join(POLICY_NAMES)}")
-            options = {"model_path": model_path} if self.policy_name in ("lvws", "dbgm") else {}
+            options = {"model_path": model_path} if self.policy_name in LEARNED_POLICIES else {}
             self.core = OnlineScheduler(make_policy(self.policy_name, seed=self.seed, **options), ack_timeout)
             self.pub = self.create_publisher(AssignmentArray, common.ASSIGNMENTS_TOPIC, common.ASSIGNMENTS_QOS)
             self.diag_pub = self.create_publisher(DiagnosticArray, common.DIAGNOSTICS_TOPIC, common.DIAGNOSTICS_QOS)
             self.create_subscription(TeamState, common.TEAM_TOPIC, self.on_team, common.TEAM_QOS)
             self.create_subscription(TaskGraph, common.GRAPH_TOPIC, self.on_graph, common.GRAPH_QOS)
-            self.create_timer(1.0, self.publish_diagnostics)
-            self.create_timer(0.05, self.on_settle)
+            # wall-clock timers: with use_sim_time a paused simulator would stop ROS-time ones
+            steady = Clock(clock_type=ClockType.STEADY_TIME)
+            self.create_timer(1.0, self.publish_diagnostics, clock=steady)
+            self.create_timer(0.05, self.on_settle, clock=steady)
             self.unsynced_since: float | None = None
             self.error = ""
             self.last_latency = 0.0
