@@ -85,19 +85,21 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from lvws_ros.metrics import expert_records, run_policy, summarize, to_csv, to_markdown
     from lvws_ros.policies import make_policy
 
+    chosen = [p.strip() for p in (args.policies or "").split(",") if p.strip()]
     if args.paper:
-        from lvws_ros.paper import reproduce
+        from lvws_ros.paper import POLICIES, reproduce
 
         text = reproduce(Path(args.out_md), data_seed=args.data_seed, policy_seed=args.seed,
-                         time_limit=args.time_limit, workers=args.workers, limit=args.limit,
-                         cache_dir=Path(args.out_dir) / "paper-cache", progress=not args.quiet)
+                         time_limit=args.time_limit, table2_time_limit=args.table2_time_limit,
+                         workers=args.workers, limit=args.limit, cache_dir=Path(args.out_dir) / "paper-cache",
+                         progress=not args.quiet, policies=chosen or POLICIES)
         print(text)
         print(f"written: {args.out_md}", file=sys.stderr)
         return 0
     if not args.instances:
         raise InstanceError("give instance files or folders, or --paper")
     instances = _instances(args.instances)
-    policies = [p.strip() for p in args.policies.split(",") if p.strip()]
+    policies = chosen or ["rand", "rand_subteam", "grp", "lvws"]
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     print(f"{len(instances)} instances, policies {policies}, seed {args.seed}", file=sys.stderr)
@@ -182,7 +184,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
     try:
         res = launch(policy=args.policy, seed=args.seed, model_path=args.model or "", rate=args.rate,
                      config=args.config or "", bag_dir=args.bag_dir, out_dir=args.out_dir, name=args.name,
-                     params_file=args.params_file, gif=not args.no_gif, timeout=args.timeout)
+                     params_file=args.params_file, gif=not args.no_gif, timeout=args.timeout,
+                     sync=not args.no_sync)
     except LaunchError as exc:
         print(f"lvws launch: failed: {exc}", file=sys.stderr)
         return 1
@@ -275,7 +278,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out-md", default="docs/results.md", help="with --paper: the markdown report")
     p.add_argument("--data-seed", type=int, default=0, help="with --paper: dataset seed")
     p.add_argument("--limit", type=int, default=None, help="with --paper: first LIMIT test instances per dataset")
-    p.add_argument("--policies", default="rand,rand_subteam,grp,lvws")
+    p.add_argument("--policies", default=None,
+                   help="comma-separated (default: rand,rand_subteam,grp,lvws; with --paper: all of Table I)")
+    p.add_argument("--table2-time-limit", type=float, default=30.0,
+                   help="with --paper: CP-SAT time limit per Dataset III instance [s]")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--time-limit", type=float, default=60.0, help="CP-SAT time limit per instance [s]")
     p.add_argument("--workers", type=int, default=8, help="CP-SAT workers")
@@ -326,6 +332,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out-dir", default="out", help="Gantt PNG, GIF, summary and logs go to OUT_DIR/<run>")
     p.add_argument("--name", default=None, help="run name (default: case-study-<policy>-<time>)")
     p.add_argument("--no-gif", action="store_true")
+    p.add_argument("--no-sync", action="store_true",
+                   help="free-running world: it does not pause at decision steps, so decision latency costs sim time")
     p.add_argument("--timeout", type=float, default=600.0, help="wall seconds before giving up")
 
     p = add("scheduler", cmd_scheduler, "the scheduler node (same as `ros2 run lvws_ros scheduler`)")

@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 from lvws_ros.model import FloatArray, Instance
 from lvws_ros.schedule import Assignment, Schedule
-from lvws_ros.subteams import covers
+from lvws_ros.subteams import covers, team_candidates
 
 TIME_TOL = 1e-9
 
@@ -185,6 +185,31 @@ def check_decision(state: State, decision: Decision, policy: str = "policy") -> 
         idx = list(team)
         if not covers(inst.robot_caps[idx], inst.robot_payload[idx], inst.task_caps[task], inst.tasks[task].payload):
             raise PolicyError(f"{policy}: subteam {[inst.robots[r].id for r in team]} does not cover task {tid!r} (Eqs. 10-11)")
+
+
+def voluntary_waits(state: State, decision: Decision) -> dict[int, tuple[int, ...]]:
+    """Robots the decision keeps waiting although they could start a ready task now.
+
+    A wait is voluntary (the paper's behaviour, section III-A) when some ready task the
+    decision leaves unassigned has a covering subteam (Eqs. 10-11) among the robots it
+    leaves free that includes the robot. Returns robot index -> those task indices.
+    """
+    inst = state.instance
+    taken = {r for _, team in decision.assignments for r in team}
+    left = [r for r in state.free_robots() if r not in taken]
+    started = {task for task, _ in decision.assignments}
+    out: dict[int, list[int]] = {}
+    if not left:
+        return {}
+    for j in state.ready_tasks():
+        if j in started:
+            continue
+        for team in team_candidates(inst.robot_caps[left], inst.robot_payload[left], inst.task_caps[j],
+                                    inst.tasks[j].payload):
+            for k in team:
+                if j not in out.setdefault(left[k], []):
+                    out[left[k]].append(j)
+    return {r: tuple(ts) for r, ts in sorted(out.items())}
 
 
 def simulate(

@@ -87,7 +87,7 @@ def _tail(path: Path, lines: int = 15) -> str:
 def launch(*, policy: str = "lvws", seed: int = 0, model_path: str = "", rate: float = 20.0,
            config: str = "", bag_dir: str | Path = "bags", out_dir: str | Path = "out", name: str | None = None,
            params_file: str | None = None, gif: bool = True, timeout: float = 600.0,
-           domain_id: int | None = None, log: Any = print) -> LaunchResult:
+           domain_id: int | None = None, sync: bool = True, log: Any = print) -> LaunchResult:
     """Run the case study end to end; raises LaunchError (children stopped) on failure."""
     from lvws_ros.report import report
 
@@ -109,7 +109,8 @@ def launch(*, policy: str = "lvws", seed: int = 0, model_path: str = "", rate: f
         sched_params += ["-p", f"model_path:={model_path}"]
     if params_file:
         sched_params = ["--params-file", params_file, *sched_params]
-    sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary_path}", "-p", "expect_subscribers:=2"]
+    sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary_path}", "-p", "expect_subscribers:=2",
+                  "-p", f"sync:={'true' if sync else 'false'}"]
     if gif:
         sim_params += ["-p", f"gif:={gif_path}"]
     if config:

@@ -63,17 +63,21 @@ class LVWSPolicy:
     def reset(self, instance: Instance) -> None:
         self._pairs = (instance, pair_features(instance))
 
-    def decide(self, state: State) -> Decision:
+    def rewards(self, state: State) -> np.ndarray:
+        """R (N x (M+1)) of Eq. 6 for this decision step: one GATN forward pass."""
+        if self._pairs is None or self._pairs[0] is not state.instance:
+            self.reset(state.instance)
+        assert self._pairs is not None
+        return reward_matrix(self.model, encode_state(state, self._pairs[1]))
+
+    def match(self, state: State, r: np.ndarray, free: list[int], idle_bias: float | None = None) -> Decision:
+        """Eqs. 7-11 on the rows of ``free`` and the ready tasks plus the idle column."""
         inst = state.instance
-        free, ready = state.free_robots(), state.ready_tasks()
+        ready = state.ready_tasks()
         if not free or not ready:
             return Decision((), tuple(free))
-        if self._pairs is None or self._pairs[0] is not inst:
-            self.reset(inst)
-        assert self._pairs is not None
-        r = reward_matrix(self.model, encode_state(state, self._pairs[1]))
         sub = r[np.ix_(free, [*ready, inst.num_tasks])]
-        sub[:, -1] += self.idle_bias
+        sub[:, -1] += self.idle_bias if idle_bias is None else idle_bias
         args = (inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[ready], inst.task_payload[ready])
         match = greedy_match(sub, *args)
         if not match.teams and not (state.task_status == TaskStatus.ASSIGNED).any():
@@ -81,6 +85,12 @@ class LVWSPolicy:
             match = greedy_match(sub, *args)
         assignments = tuple((ready[j], tuple(free[i] for i in team)) for j, team in sorted(match.teams.items()))
         return Decision(assignments, tuple(free[i] for i in match.waiting))
+
+    def decide(self, state: State) -> Decision:
+        free = state.free_robots()
+        if not free or not state.ready_tasks():
+            return Decision((), tuple(free))
+        return self.match(state, self.rewards(state), free)
 
 
 class DBGMPolicy:
@@ -140,48 +150,73 @@ def continue_after(state: State, decision: Decision, policy: Policy) -> float:
 
 
 class LVWSRolloutPolicy:
-    """LVWS with one-step rollout (beyond the paper): at each decision step the
-    candidates are LVWS's matching, the matchings with the learned idle column at
-    ``wait_biases`` (voluntary waiting as the network proposes it) and GRP's; each is
-    scored by letting LVWS finish the schedule from there, and the shortest wins (LVWS's
-    own on ties). A rollout is never worse than LVWS alone on the executor's model,
-    at the price of one simulated schedule per distinct candidate and step."""
+    """LVWS with one-step rollout (beyond the paper).
+
+    At each decision step the candidates are LVWS's matching; the matchings with the
+    learned idle column at ``wait_biases`` (voluntary waiting as the network proposes
+    it); GRP's matching; with ``hold_back``, LVWS's matching with one of its subteams
+    told to wait; with ``exclude``, LVWS's matching redone without one free robot (who
+    waits). Each candidate is scored by the makespan reached when LVWS finishes the
+    schedule from there (and GRP, with ``finish_with_grp``: the better of the two), and
+    the shortest wins, LVWS's own on ties. Never worse than LVWS alone on the executor's
+    model, at the price of one or two simulated schedules per distinct candidate and step.
+    """
 
     name = "lvws_rollout"
 
     def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
-                 wait_biases: tuple[float, ...] = (-0.2, -0.1, 0.0), hold_back: bool = False) -> None:
-        self.hold_back = hold_back
+                 wait_biases: tuple[float, ...] = (-0.2, -0.1, 0.0), hold_back: bool = True,
+                 exclude: bool = True, finish_with_grp: bool = True) -> None:
         if model is None:
             model, meta = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["lvws"])
             base_bias = float(meta.get("idle_bias", NO_VOLUNTARY_WAIT))
         else:
             base_bias = NO_VOLUNTARY_WAIT
         self.base = LVWSPolicy(model=model, idle_bias=base_bias)
-        self.waiting = [LVWSPolicy(model=model, idle_bias=b) for b in wait_biases]
+        self.wait_biases = wait_biases
+        self.hold_back, self.exclude, self.finish_with_grp = hold_back, exclude, finish_with_grp
         from lvws_ros.policies import GreedyPayloadPolicy
 
         self.grp = GreedyPayloadPolicy()
 
     def reset(self, instance: Instance) -> None:
-        for p in self._all():
-            p.reset(instance)
+        self.base.reset(instance)
+        self.grp.reset(instance)
 
-    def _all(self) -> list[Policy]:
-        return [self.base, *self.waiting, self.grp]
-
-    def decide(self, state: State) -> Decision:
-        first = self.base.decide(state)
-        candidates = [first]
-        proposals = [p.decide(state) for p in self._all()[1:]]
-        if self.hold_back and len(first.assignments) > 1:  # each subteam told to wait instead
+    def candidates(self, state: State) -> list[Decision]:
+        """Distinct candidate decisions, LVWS's own first."""
+        free = state.free_robots()
+        if not free or not state.ready_tasks():
+            return [Decision((), tuple(free))]
+        r = self.base.rewards(state)
+        first = self.base.match(state, r, free)
+        proposals = [self.base.match(state, r, free, b) for b in self.wait_biases]
+        proposals.append(self.grp.decide(state))
+        if self.hold_back:
             proposals += [Decision(tuple(a for a in first.assignments if a != held),
                                    tuple(sorted({*first.waiting, *held[1]}))) for held in first.assignments]
+        if self.exclude and len(free) > 1:
+            for x in free:
+                d = self.base.match(state, r, [i for i in free if i != x])
+                proposals.append(Decision(d.assignments, tuple(sorted({x, *d.waiting}))))
+        out = [first]
+        seen = {frozenset(first.assignments)}
         for d in proposals:
-            if all(set(d.assignments) != set(c.assignments) for c in candidates):
-                candidates.append(d)
+            if frozenset(d.assignments) not in seen:
+                seen.add(frozenset(d.assignments))
+                out.append(d)
+        return out
+
+    def score(self, state: State, decision: Decision) -> float:
+        makespan = continue_after(state, decision, self.base)
+        if self.finish_with_grp:
+            makespan = min(makespan, continue_after(state, decision, self.grp))
+        return makespan
+
+    def decide(self, state: State) -> Decision:
+        candidates = self.candidates(state)
         if len(candidates) == 1:
-            return first
-        scores = [continue_after(state, d, self.base) for d in candidates]
+            return candidates[0]
+        scores = [self.score(state, d) for d in candidates]
         self.base.reset(state.instance)  # simulate() reset it; keep the pair cache valid
         return candidates[int(np.argmin(scores))]

@@ -12,7 +12,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from lvws_ros.executor import Policy, PolicyError, simulate
+from lvws_ros.executor import Policy, PolicyError, simulate, voluntary_waits
 from lvws_ros.expert import ExpertResult, solve_exact
 from lvws_ros.model import Instance
 from lvws_ros.schedule import check_schedule
@@ -50,6 +50,7 @@ class RunRecord:
     decisions: int
     compute_seconds: float
     error: str = ""
+    voluntary_steps: int = 0  # decision steps where a free robot waits though it could start a ready task
 
 
 @dataclass(frozen=True)
@@ -84,12 +85,13 @@ def run_policy(inst: Instance, policy: Policy) -> RunRecord:
     """One run, checked against the rules of formats.md; a policy error is an invalid run.
     The policy object is reused across instances (``reset`` restores its seed)."""
     try:
-        res = simulate(inst, policy)
+        res = simulate(inst, policy, record_states=True)
     except PolicyError as exc:
         return RunRecord(inst.name, policy.name, False, math.nan, 0, 0.0, str(exc))
     problems = check_schedule(inst, res.schedule)
+    voluntary = sum(bool(voluntary_waits(s.state, s.decision)) for s in res.steps if s.state is not None)
     return RunRecord(inst.name, policy.name, not problems, res.schedule.makespan, res.schedule.decisions,
-                     res.schedule.compute_seconds, "; ".join(map(str, problems)))
+                     res.schedule.compute_seconds, "; ".join(map(str, problems)), voluntary)
 
 
 def summarize(runs: Iterable[RunRecord], experts: dict[str, ExpertRecord]) -> list[PolicySummary]:

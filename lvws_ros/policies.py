@@ -110,7 +110,7 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
 
         model_path = options.get("model_path") or None
         if name == "lvws_rollout":
-            return LVWSRolloutPolicy(model_path=model_path, hold_back=True)
+            return LVWSRolloutPolicy(model_path=model_path)
         return LVWSPolicy(model_path=model_path) if name == "lvws" else DBGMPolicy(model_path=model_path)
     if name not in factories:
         raise ValueError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")

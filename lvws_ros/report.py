@@ -10,12 +10,15 @@ really happened.
 from __future__ import annotations
 
 import statistics
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.bag import BagError, Run, read_run
+from lvws_ros.bag import BagError, Decision, Run, read_run
+from lvws_ros.executor import Decision as StepDecision
+from lvws_ros.executor import State, voluntary_waits
 from lvws_ros.model import Instance, Robot, Task
 from lvws_ros.online import GraphSnapshot, OnlineScheduler, TeamSnapshot, build_instance, build_state
 from lvws_ros.policies import LEARNED_POLICIES, make_policy
@@ -38,6 +41,8 @@ class RunReport:
     waits: list[tuple[int, float, tuple[str, ...]]]  # (step, sim time, robots told to wait)
     subteams: list[tuple[str, tuple[str, ...]]]
     topics: dict[str, int] = field(default_factory=dict)
+    # (step, sim time, robot -> ready tasks it could have started); None: inputs not in the bag
+    voluntary: list[tuple[int, float, dict[str, tuple[str, ...]]]] | None = None
 
     def text(self) -> str:
         lines = [f"bag: {self.bag}", f"policy: {self.policy}; decisions: {self.decisions}; decision latency "
@@ -52,6 +57,13 @@ class RunReport:
         lines += ["", "subteams: " + (", ".join(f"{t} <- {'+'.join(r)}" for t, r in self.subteams) or "none")]
         waits = [f"step {s} (t={t:.2f}): {', '.join(r)}" for s, t, r in self.waits]
         lines += ["robots told to wait: " + ("; ".join(waits) if waits else "none")]
+        if self.voluntary is None:
+            lines += ["voluntary waits: unknown (the decisions' inputs are not all in the bag)"]
+        else:
+            vol = [f"step {s} (t={t:.2f}): " + ", ".join(f"{r} (could start {'/'.join(ts)})" for r, ts in w.items())
+                   for s, t, w in self.voluntary]
+            lines += ["voluntary waits (free, and a ready task they could start now): "
+                      + ("; ".join(vol) if vol else "none")]
         return "\n".join(lines)
 
 
@@ -83,7 +95,25 @@ def report_run(run: Run) -> RunReport:
     waits = [(d.step, max(d.team_stamp, d.graph_stamp), d.waiting) for d in run.decisions if d.waiting]
     subteams = [(t, r) for d in run.decisions for t, r in d.assignments if len(r) > 1]
     return RunReport(run.path, inst, sched, complete, problems, len(run.decisions), policy,
-                     statistics.median(lat), float(np.percentile(lat, 99)), waits, subteams, run.topics)
+                     statistics.median(lat), float(np.percentile(lat, 99)), waits, subteams, run.topics,
+                     recorded_voluntary_waits(run))
+
+
+def recorded_voluntary_waits(run: Run) -> list[tuple[int, float, dict[str, tuple[str, ...]]]] | None:
+    """The voluntary waits of each recorded decision, judged in the state it was made in."""
+    out = []
+    try:
+        for d, _, _, state in decision_inputs(run):
+            inst = state.instance
+            known = [(inst.task_index[t], tuple(inst.robot_index[r] for r in rs)) for t, rs in d.assignments
+                     if t in inst.task_index and all(r in inst.robot_index for r in rs)]
+            vol = voluntary_waits(state, StepDecision(tuple(known)))
+            if vol:
+                out.append((d.step, state.time, {inst.robots[r].id: tuple(inst.tasks[j].id for j in ts)
+                                                 for r, ts in vol.items()}))
+    except BagError:
+        return None
+    return out
 
 
 def report(bag: str | Path, gantt_png: str | Path | None = None) -> RunReport:
@@ -104,6 +134,35 @@ class Mismatch:
     replayed: tuple[tuple[tuple[str, tuple[str, ...]], ...], tuple[str, ...]]
 
 
+def decision_inputs(run: Run, ack_timeout: float = 5.0) -> Iterator[tuple[Decision, TeamSnapshot, GraphSnapshot, State]]:
+    """Each recorded decision with the TeamState and TaskGraph it names and the executor
+    state the scheduler built from them (tasks assigned but not yet acknowledged by the
+    simulator count as running, as in the node)."""
+    # A stamp names the first snapshot taken at that instant: a paused (sync) simulator
+    # republishes at the same sim time once it has executed the decision.
+    teams: dict[float, TeamSnapshot] = {}
+    graphs: dict[float, GraphSnapshot] = {}
+    for t in run.teams:
+        teams.setdefault(round(t.stamp, 6), t)
+    for g in run.graphs:
+        graphs.setdefault(round(g.stamp, 6), g)
+    pending: dict[str, tuple[tuple[str, ...], float]] = {}
+    inst: Instance | None = None
+    for d in sorted(run.decisions, key=lambda d: d.step):
+        team, graph = teams.get(round(d.team_stamp, 6)), graphs.get(round(d.graph_stamp, 6))
+        if team is None or graph is None:
+            raise BagError(f"{run.path}: decision {d.step} names inputs the bag does not hold "
+                           f"(team {d.team_stamp}, graph {d.graph_stamp})")
+        if inst is None:
+            inst = build_instance(team, graph)
+        now = max(team.stamp, graph.stamp)
+        status = {t.id: t.status for t in graph.tasks}
+        pending = {k: v for k, v in pending.items() if status.get(k) == 1 and now - v[1] <= ack_timeout}
+        yield d, team, graph, build_state(inst, team, graph, {k: v[0] for k, v in pending.items()})
+        for task, robots in d.assignments:
+            pending[task] = (tuple(robots), now)
+
+
 def verify(bag: str | Path, *, policy: str | None = None, seed: int = 0, model_path: str | None = None,
            ack_timeout: float = 5.0) -> tuple[int, list[Mismatch]]:
     """Feed each recorded decision's inputs (the TeamState and TaskGraph it names) to the
@@ -114,33 +173,12 @@ def verify(bag: str | Path, *, policy: str | None = None, seed: int = 0, model_p
     name = policy or run.decisions[0].policy
     options = {"model_path": model_path} if name in LEARNED_POLICIES and model_path else {}
     online = OnlineScheduler(make_policy(name, seed=seed, **options), ack_timeout)
-    # A stamp names the first snapshot taken at that instant: a paused (sync) simulator
-    # republishes at the same sim time once it has executed the decision.
-    teams: dict[float, TeamSnapshot] = {}
-    graphs: dict[float, GraphSnapshot] = {}
-    for t in run.teams:
-        teams.setdefault(round(t.stamp, 6), t)
-    for g in run.graphs:
-        graphs.setdefault(round(g.stamp, 6), g)
-    pending: dict[str, tuple[tuple[str, ...], float]] = {}
     bad: list[Mismatch] = []
-    inst: Instance | None = None
-    for d in sorted(run.decisions, key=lambda d: d.step):
-        team, graph = teams.get(round(d.team_stamp, 6)), graphs.get(round(d.graph_stamp, 6))
-        if team is None or graph is None:
-            raise BagError(f"{run.path}: decision {d.step} names inputs the bag does not hold "
-                           f"(team {d.team_stamp}, graph {d.graph_stamp})")
-        if inst is None:
-            inst = build_instance(team, graph)
-            online.policy.reset(inst)
-        now = max(team.stamp, graph.stamp)
-        status = {t.id: t.status for t in graph.tasks}
-        pending = {k: v for k, v in pending.items() if status.get(k) == 1 and now - v[1] <= ack_timeout}
+    for k, (d, team, graph, state) in enumerate(decision_inputs(run, ack_timeout)):
+        if k == 0:
+            online.policy.reset(state.instance)
         online.team, online.graph = team, graph
-        state = build_state(inst, team, graph, {k: v[0] for k, v in pending.items()})
         got = online.decide_state(state)
-        for task, robots in got.assignments:
-            pending[task] = (robots, now)
         rec = (tuple(sorted((t, tuple(r)) for t, r in d.assignments)), tuple(sorted(d.waiting)))
         new = (tuple(sorted(got.assignments)), tuple(sorted(got.waiting)))
         if rec != new:

@@ -63,3 +63,22 @@ def test_bad_input_exits_2_with_message(tmp_path):
     assert res.returncode == 2 and "cyclic prerequisites" in res.stderr
     res = lvws("solve", tmp_path / "missing.json", check=False)
     assert res.returncode == 2 and "cannot read" in res.stderr
+
+
+def test_evaluate_paper_writes_both_tables_and_the_waiting_section(tmp_path):
+    import re
+
+    md = tmp_path / "results.md"
+    lvws("evaluate", "--paper", "--limit", "2", "--policies", "grp,lvws", "--workers", "2", "--time-limit", "30",
+         "--table2-time-limit", "2", "--out-dir", tmp_path, "--out-md", md, "--quiet")
+    text = md.read_text()
+    for heading in ("## Table I", "## Table II", "## Decision time", "## Voluntary waiting"):
+        assert heading in text
+    rows = {m[0]: [float(x) for x in m[1:]] for m in re.findall(
+        r"^\| (GRP|LVWS) \| ([\d.]+) \| [\d.—]+ \| ([\d.]+) \| [\d.—]+ \|$", text, re.M)}
+    assert set(rows) == {"GRP", "LVWS"} and all(x >= 0 for v in rows.values() for x in v)  # vs proven optima
+    assert "Dataset I: 2/2 optima proven" in text
+    assert re.search(r"^\| exact expert \(first 2 test instances\) \| [\d.]+ \| [\d.]+ \|$", text, re.M)
+    assert (tmp_path / "paper-cache" / "expert-I-s0.json").is_file()
+    bad = lvws("evaluate", "--paper", "--policies", "exact", "--out-dir", tmp_path, check=False)
+    assert bad.returncode == 2 and "compare" in bad.stderr

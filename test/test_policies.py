@@ -98,3 +98,26 @@ def test_policy_names():
     assert set(BASELINES) | {"exact"} <= set(POLICY_NAMES)
     with pytest.raises(ValueError, match="unknown policy"):
         make_policy("nope")
+
+
+def test_voluntary_waits_are_free_robots_kept_from_a_task_they_could_start():
+    from lvws_ros.executor import voluntary_waits
+    from lvws_ros.model import Instance, Robot, Task
+
+    inst = Instance("w", ("a", "b"),
+                    (Robot("r0", (1, 0), 5.0), Robot("r1", (1, 0), 5.0), Robot("r2", (0, 1), 5.0)),
+                    (Task("heavy", (1, 0), 8.0, 2.0), Task("b_job", (0, 1), 1.0, 1.0),
+                     Task("later", (1, 0), 1.0, 1.0, ("heavy",))))
+    state = State.initial(inst)
+    assert state.ready_tasks() == [0, 1]
+    # both a-robots wait: together they could carry "heavy" (8 > 5 each), so both waits are voluntary
+    assert voluntary_waits(state, Decision(((1, (2,)),))) == {0: (0,), 1: (0,)}
+    # r0 + r1 on "heavy": r2 left while b_job is ready waits voluntarily
+    assert voluntary_waits(state, Decision(((0, (0, 1)),))) == {2: (1,)}
+    # everything ready is taken: nobody waits voluntarily
+    assert voluntary_waits(state, Decision(((0, (0, 1)), (1, (2,))))) == {}
+    # once r2 has started b_job, only "heavy" is ready: the a-robots still could carry it
+    state.start(1, (2,))
+    assert voluntary_waits(state, Decision()) == {0: (0,), 1: (0,)}
+    state.robot_free_at[1] = 5.0  # r1 busy: r0 alone cannot carry "heavy"
+    assert voluntary_waits(state, Decision()) == {}

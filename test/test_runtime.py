@@ -73,7 +73,22 @@ def test_launcher_runs_the_case_study_end_to_end(launched):
     assert launched.gif is not None and launched.gif.read_bytes()[:3] == b"GIF"
     # the paper's two behaviours, from the bag alone
     assert rep.waits, "no robot was told to wait"
+    assert rep.voluntary is not None and "voluntary waits" in rep.text()  # every decision's inputs were recorded
     assert any(t == "t10" and {"husky_1"} < set(r) for t, r in rep.subteams), rep.subteams
+
+
+def test_a_free_running_world_still_runs_to_a_valid_schedule(tmp_path):
+    """sync:=false: the world does not pause for decisions, so the schedule depends on
+    timing, but every assignment must still be accepted and the result valid."""
+    from lvws_ros.launcher import launch
+
+    res = launch(policy="grp", rate=10.0, sync=False, bag_dir=tmp_path / "bags", out_dir=tmp_path / "out",
+                 name="free", gif=False, timeout=300.0, log=lambda _t: None)
+    s = res.summary
+    assert s["tasks_done"] == 14 and s["error"] == "" and s["rejected"] == []
+    rep = report(res.bag)
+    assert rep.complete and check_schedule(rep.instance, rep.schedule) == []
+    assert rep.schedule.makespan == pytest.approx(s["makespan"], abs=1e-6)
 
 
 def test_the_bag_opens_with_both_readers_and_holds_every_topic(launched):
