@@ -95,6 +95,18 @@ def test_the_bag_opens_with_both_readers_and_holds_every_topic(launched):
     a, b = read_with_anyreader(launched.bag), read_with_mcap(launched.bag)
     assert set(a) == ALL_TOPICS and a == b
     assert a["/lvws/assignments"] == launched.summary["decisions_received"]
+    # each connection keeps its topic's QoS (task graph latched: reliable + transient-local)
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import QosDurability, QosReliability
+
+    with AnyReader([launched.bag]) as reader:
+        for conn in reader.connections:
+            qos = TOPICS[conn.topic][1]
+            (got,) = conn.ext.offered_qos_profiles
+            assert got.depth == qos.depth, conn.topic
+            assert (got.reliability == QosReliability.RELIABLE) == (qos.reliability == ReliabilityPolicy.RELIABLE)
+            assert (got.durability == QosDurability.TRANSIENT_LOCAL) == (
+                qos.durability == DurabilityPolicy.TRANSIENT_LOCAL), conn.topic
 
 
 def test_the_recorded_decisions_replay_deterministically(launched):
