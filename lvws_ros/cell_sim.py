@@ -26,12 +26,12 @@ from typing import Any
 import pymunk
 import yaml
 
-from lvws_ros.executor import Policy
+from lvws_ros.executor import Policy, TaskStatus
 from lvws_ros.model import Instance, Robot, Task
 from lvws_ros.online import GraphSnapshot, OnlineDecision, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot
 from lvws_ros.schedule import Assignment, Schedule
 
-QUEUED, READY, ASSIGNED, DONE = 0, 1, 2, 3  # lvws_msgs/Task STATUS_*
+QUEUED, READY, ASSIGNED, DONE = TaskStatus.QUEUED, TaskStatus.READY, TaskStatus.ASSIGNED, TaskStatus.DONE
 ARM_KINDS = ("panda",)
 MOBILE_KINDS = ("jackal", "husky")
 

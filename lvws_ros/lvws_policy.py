@@ -61,12 +61,12 @@ class LVWSPolicy:
         self._pairs: tuple[Instance, np.ndarray] | None = None
 
     def reset(self, instance: Instance) -> None:
-        self._pairs = (instance, pair_features(instance))
+        if self._pairs is None or self._pairs[0] is not instance:  # rollouts reset once per simulation
+            self._pairs = (instance, pair_features(instance))
 
     def rewards(self, state: State) -> np.ndarray:
         """R (N x (M+1)) of Eq. 6 for this decision step: one GATN forward pass."""
-        if self._pairs is None or self._pairs[0] is not state.instance:
-            self.reset(state.instance)
+        self.reset(state.instance)
         assert self._pairs is not None
         return reward_matrix(self.model, encode_state(state, self._pairs[1]))
 
@@ -218,5 +218,4 @@ class LVWSRolloutPolicy:
         if len(candidates) == 1:
             return candidates[0]
         scores = [self.score(state, d) for d in candidates]
-        self.base.reset(state.instance)  # simulate() reset it; keep the pair cache valid
         return candidates[int(np.argmin(scores))]

@@ -117,6 +117,15 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
     return State(inst, now, free_at, status, start, teams)
 
 
+def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: GraphSnapshot, now: float,
+                  ack_timeout: float) -> dict[str, tuple[tuple[str, ...], float]]:
+    """The assignments (task -> (robots, time sent)) the world has not acknowledged yet:
+    a task no longer READY was acknowledged (or is gone); one older than ``ack_timeout``
+    was never taken and is offered again."""
+    status = {t.id: t.status for t in graph.tasks}
+    return {k: v for k, v in pending.items() if status.get(k) == TaskStatus.READY and now - v[1] <= ack_timeout}
+
+
 class OnlineScheduler:
     """Decides when a robot became available or a task became ready; see the module doc."""
 
@@ -157,23 +166,13 @@ class OnlineScheduler:
             self.policy.reset(self._inst)
         return self._inst
 
-    def _release_stale(self, now: float) -> None:
-        assert self.graph is not None
-        status = {t.id: t.status for t in self.graph.tasks}
-        for tid in list(self.pending):
-            _, when = self.pending[tid]
-            if status.get(tid) != TaskStatus.READY:
-                del self.pending[tid]  # acknowledged (or gone)
-            elif now - when > self.ack_timeout:
-                del self.pending[tid]  # the world never took it: offer it again
-
     def decide(self) -> OnlineDecision | None:
         """A decision if one is due (a new free robot or a new ready task), else None."""
         if self.team is None or self.graph is None:
             return None
         inst = self.instance()
         now = max(self.team.stamp, self.graph.stamp)
-        self._release_stale(now)
+        self.pending = still_pending(self.pending, self.graph, now, self.ack_timeout)
         state = build_state(inst, self.team, self.graph, {k: v[0] for k, v in self.pending.items()})
         free = frozenset(inst.robots[i].id for i in state.free_robots())
         ready = frozenset(inst.tasks[j].id for j in state.ready_tasks())

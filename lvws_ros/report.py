@@ -18,13 +18,11 @@ import numpy as np
 
 from lvws_ros.bag import BagError, Decision, Run, read_run
 from lvws_ros.executor import Decision as StepDecision
-from lvws_ros.executor import State, voluntary_waits
+from lvws_ros.executor import State, TaskStatus, voluntary_waits
 from lvws_ros.model import Instance, Robot, Task
-from lvws_ros.online import GraphSnapshot, OnlineScheduler, TeamSnapshot, build_instance, build_state
+from lvws_ros.online import GraphSnapshot, OnlineScheduler, TeamSnapshot, build_instance, build_state, still_pending
 from lvws_ros.policies import LEARNED_POLICIES, make_policy
 from lvws_ros.schedule import Assignment, Schedule, Violation, check_schedule
-
-DONE = 3
 
 
 @dataclass
@@ -73,7 +71,7 @@ def executed(team: TeamSnapshot, graph: GraphSnapshot, name: str = "run") -> tup
     tasks, out = [], []
     for t in graph.tasks:
         duration = t.duration
-        if t.status == DONE and t.start is not None and t.end is not None:
+        if t.status == TaskStatus.DONE and t.start is not None and t.end is not None:
             duration = t.end - t.start
             out.append(Assignment(t.id, tuple(t.assigned_robots), t.start, t.end))
         tasks.append(Task(t.id, tuple(t.capabilities), t.payload, max(duration, 1e-9), tuple(t.prerequisites)))
@@ -89,7 +87,7 @@ def report_run(run: Run) -> RunReport:
     policy = run.decisions[0].policy if run.decisions else "?"
     sched.policy = policy
     sched.decisions = len(run.decisions)
-    complete = all(t.status == DONE for t in graph.tasks)
+    complete = all(t.status == TaskStatus.DONE for t in graph.tasks)
     problems = check_schedule(inst, sched) if complete else []
     lat = [1000 * d.latency for d in run.decisions] or [float("nan")]
     waits = [(d.step, max(d.team_stamp, d.graph_stamp), d.waiting) for d in run.decisions if d.waiting]
@@ -156,8 +154,7 @@ def decision_inputs(run: Run, ack_timeout: float = 5.0) -> Iterator[tuple[Decisi
         if inst is None:
             inst = build_instance(team, graph)
         now = max(team.stamp, graph.stamp)
-        status = {t.id: t.status for t in graph.tasks}
-        pending = {k: v for k, v in pending.items() if status.get(k) == 1 and now - v[1] <= ack_timeout}
+        pending = still_pending(pending, graph, now, ack_timeout)
         yield d, team, graph, build_state(inst, team, graph, {k: v[0] for k, v in pending.items()})
         for task, robots in d.assignments:
             pending[task] = (tuple(robots), now)

@@ -39,7 +39,7 @@ def make_node() -> Any:
     from rosgraph_msgs.msg import Clock
     from visualization_msgs.msg import Marker, MarkerArray
 
-    from lvws_ros.cell_sim import ARM_KINDS, AssignmentRejected, CellSim, load_cell_config
+    from lvws_ros.cell_sim import ARM_KINDS, READY, AssignmentRejected, CellSim, load_cell_config
     from lvws_ros.ros import common
 
     class CellSimNode(Node):
@@ -144,7 +144,7 @@ def make_node() -> Any:
         def decision_due(self) -> bool:
             team = self.sim.team_snapshot()
             graph = self.sim.graph_snapshot()
-            return any(r.available for r in team.robots) and any(t.status == 1 for t in graph.tasks)
+            return any(r.available for r in team.robots) and any(t.status == READY for t in graph.tasks)
 
         def on_tick(self) -> None:
             if self.finished:

@@ -71,11 +71,15 @@ def to_duration(seconds: float) -> Duration:
     return Duration(sec=sec, nanosec=min(round((seconds - sec) * 1e9), 999_999_999))
 
 
-def team_to_msg(snap: TeamSnapshot, frame_id: str = "map") -> TeamState:
-    msg = TeamState()
+def _stamped(msg: Any, snap: TeamSnapshot | GraphSnapshot, frame_id: str) -> Any:
     msg.header.stamp = to_time(snap.stamp)
     msg.header.frame_id = frame_id
     msg.capability_names = list(snap.capability_names)
+    return msg
+
+
+def team_to_msg(snap: TeamSnapshot, frame_id: str = "map") -> TeamState:
+    msg = _stamped(TeamState(), snap, frame_id)
     for r in snap.robots:
         rs = RobotState(id=r.id, kind=r.kind, available=r.available, capabilities=list(r.capabilities),
                         payload=float(r.payload), current_task=r.current_task, busy_for=float(r.busy_for))
@@ -93,10 +97,7 @@ def team_from_msg(msg: Any) -> TeamSnapshot:
 
 
 def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
-    msg = TaskGraph()
-    msg.header.stamp = to_time(snap.stamp)
-    msg.header.frame_id = frame_id
-    msg.capability_names = list(snap.capability_names)
+    msg = _stamped(TaskGraph(), snap, frame_id)
     for t in snap.tasks:
         msg.tasks.append(Task(id=t.id, status=int(t.status), capabilities=list(t.capabilities),
                               payload=float(t.payload), duration=float(t.duration),
