@@ -62,14 +62,18 @@ demo: env
 
 # Benchmarks print figures (with the machine); they assert nothing and are not in `make test`.
 bench: env
-	$(PY) -m lvws_ros.bench
+	$(PY) -m lvws_ros.cli.bench
 
+# ruff; mypy (strict on the core); import-linter's layer, cycle and dependency contracts
+# (.importlinter) on the source tree.
 lint: env
 	$(PY) -m ruff check lvws_ros test
 	$(PY) -m mypy lvws_ros
+	$(PY) -m mypy --strict lvws_ros/core lvws_ros/errors.py
+	PYTHONPATH=$(CURDIR) $(VENV)/bin/lint-imports --no-cache
 
 clean:
-	rm -rf $(BUILD) *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(BUILD) *.egg-info .pytest_cache .mypy_cache .ruff_cache .import_linter_cache
 
 distclean: clean
 	rm -rf $(VENV)

@@ -16,7 +16,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
-    package_data={PACKAGE: ["models/*.pt", "models/*.json", "py.typed"]},
+    package_data={PACKAGE: ["py.typed"], f"{PACKAGE}.learning": ["models/*.pt", "models/*.json"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -30,7 +30,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "lvws = lvws_ros.cli:main",
+            "lvws = lvws_ros.cli.main:main",
             "scheduler = lvws_ros.ros.scheduler_node:main",
             "cell_sim = lvws_ros.ros.cell_sim_node:main",
             "recorder = lvws_ros.ros.recorder:main",

@@ -1,7 +1,29 @@
 """lvws_ros: heterogeneous multi-robot scheduling with dynamic subteaming and voluntary waiting.
 
-The core modules (model, schedule, executor, matching, expert, policies, datasets,
-metrics) import no ROS package; the ROS 2 nodes live in :mod:`lvws_ros.ros`.
+Layers (imports point down only; ``make lint`` enforces it with import-linter)::
+
+    cli        the lvws command, paper tables, bag reports, Gantt charts, benchmarks
+    ros        rclpy only here: topics, message conversion, nodes, recorder, replay, bags, launcher
+    registry   policy names -> policies
+    learning   torch only here: features, GATN, loss, demonstrations, training, learned policies
+    policies   baselines; exact (OR-Tools only here)
+    sim        pymunk world of the case study (beside learning/policies, below ros)
+    core       numpy only: problem, formats, schedule rules, subteams, matching, executor, online
+    errors     LvwsError and its subclasses
+
+The paper's equations, where they live:
+
+==========  ==========================================================================
+Eq. 1-2     GAT layer (attention weights, aggregation): learning/gatn.py:GATLayer.forward
+Eq. 3-5     transformer for the global embedding: learning/gatn.py:TransformerLayer._attend
+Eq. 6       reward MLP R_ij = psi(h_i^r, h_j^t, g^r, g^t): learning/gatn.py:GATN.forward
+Eq. 7       maximise sum A_ij R_ij: core/matching.py:greedy_match (exact: policies/exact.py:exact_match)
+Eq. 8-9     one task (or the idle task) per robot: core/matching.py:greedy_match,
+            core/executor.py:check_decision
+Eq. 10-11   subteam covers capabilities and payload: core/subteams.py:shortfall / covered / covers
+Eq. 12      imitation loss with E and X: learning/loss.py:imitation_loss, learning/loss.py:feasibility_mask,
+            expert rewards E: learning/demonstrations.py:label_state
+==========  ==========================================================================
 """
 
 __version__ = "0.1.0"

@@ -12,10 +12,21 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-from lvws_ros.ros.common import user_args
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
+
+from lvws_ros.errors import LvwsError
+from lvws_ros.ros.bag import open_writer, qos_to_bag, typestore
+from lvws_ros.ros.topics import TOPICS, message_class
+
+RECORDER_DEPTH = 10000  # history per subscription: bursts wait here instead of being overwritten
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -26,79 +37,49 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def qos_for_bag(qos: Any) -> Any:
-    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
-
-    from lvws_ros.bag import qos_to_bag
-
-    return qos_to_bag(qos.depth, qos.reliability == ReliabilityPolicy.RELIABLE,
-                      qos.durability == DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-RECORDER_DEPTH = 10000  # history per subscription: bursts wait here instead of being overwritten
-
-
-def recording_qos(qos: Any) -> Any:
+def recording_qos(qos: QoSProfile) -> QoSProfile:
     """The topic's reliability and durability with a deep history (the bag keeps the
     topic's own QoS)."""
-    from rclpy.qos import HistoryPolicy, QoSProfile
-
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORDER_DEPTH, reliability=qos.reliability,
                       durability=qos.durability)
 
 
-def make_node(output: Path) -> Any:
-    from rclpy.node import Node
+class Recorder(Node):
+    def __init__(self, output: Path) -> None:
+        super().__init__("recorder")
+        self.writer = open_writer(output)
+        self.count = 0
+        self.closed = False
+        store = typestore()
+        for topic, (type_name, qos) in TOPICS.items():
+            conn = self.writer.add_connection(topic, type_name, typestore=store, offered_qos_profiles=[qos_to_bag(qos)])
+            self.create_subscription(message_class(type_name), topic, self._writer_for(conn), recording_qos(qos),
+                                     raw=True)
 
-    from lvws_ros.bag import open_writer, typestore
-    from lvws_ros.ros.common import TOPICS, message_class
-
-    class Recorder(Node):
-        def __init__(self) -> None:
-            super().__init__("recorder")
-            self.store = typestore()
-            self.writer = open_writer(output)
-            self.count = 0
-            self.closed = False
-            self.conns = {}
-            for topic, (type_name, qos) in TOPICS.items():
-                self.conns[topic] = self.writer.add_connection(topic, type_name, typestore=self.store,
-                                                               offered_qos_profiles=[qos_for_bag(qos)])
-                self.create_subscription(message_class(type_name), topic, self._callback(topic), recording_qos(qos),
-                                         raw=True)
-
-        def _callback(self, topic: str) -> Any:
-            conn = self.conns[topic]
-
-            def write(data: bytes) -> None:
-                if not self.closed:
-                    self.writer.write(conn, time.time_ns(), data)
-                    self.count += 1
-            return write
-
-        def close(self) -> None:
+    def _writer_for(self, conn: object) -> Callable[[bytes], None]:
+        def write(data: bytes) -> None:
             if not self.closed:
-                self.closed = True
-                self.writer.close()
+                self.writer.write(conn, time.time_ns(), data)  # type: ignore[arg-type]
+                self.count += 1
+        return write
 
-    return Recorder()
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self.writer.close()
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    args = build_parser().parse_args(user_args(argv))
+    args = build_parser().parse_args(remove_ros_args(argv))
     output = Path(args.output) if args.output else Path("bags") / time.strftime("run-%Y%m%d-%H%M%S")
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.signals import SignalHandlerOptions
-
     rclpy.init(args=["recorder", *argv], signal_handler_options=SignalHandlerOptions.ALL)
     try:
-        node = make_node(output)
-    except Exception as exc:
+        node = Recorder(output)
+    except LvwsError as exc:
         sys.stderr.write(f"recorder: {exc}\n")
         rclpy.try_shutdown()
-        return 1
+        return 2
     print(f"recording to {output}", flush=True)
     try:
         rclpy.spin(node)

@@ -11,7 +11,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from lvws_ros.ros.common import message_class, user_args
+import rclpy
+from rclpy.utilities import remove_ros_args
+from rosbags.rosbag2 import Reader
+
+from lvws_ros.errors import BagError, LvwsError
+from lvws_ros.ros.bag import qos_from_bag
+from lvws_ros.ros.topics import message_class
 
 # Replay publishes faster than the recording at --rate > 1; a deeper history than the
 # recorded one keeps reliable subscribers from losing messages to overwrites.
@@ -28,34 +34,11 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def qos_from_bag(conn: Any) -> Any:
-    """The QoS the recording offered (the first profile; depth at least REPLAY_MIN_DEPTH),
-    else reliable."""
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from rosbags.interfaces import QosDurability, QosReliability
-
-    profiles = getattr(conn.ext, "offered_qos_profiles", None) or []
-    if not profiles:
-        return QoSProfile(depth=REPLAY_MIN_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
-    q = profiles[0]
-    return QoSProfile(
-        depth=max(int(q.depth), REPLAY_MIN_DEPTH),
-        reliability=ReliabilityPolicy.BEST_EFFORT if q.reliability == QosReliability.BEST_EFFORT
-        else ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if q.durability == QosDurability.TRANSIENT_LOCAL
-        else DurabilityPolicy.VOLATILE)
-
-
 def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[str] | None = None,
            log: Any = print) -> dict[str, int]:
     """Publish every message of ``bag``; returns the count per topic."""
-    import rclpy
-    from rosbags.rosbag2 import Reader
-
-    from lvws_ros.bag import BagError
-
     if rate <= 0:
-        raise ValueError(f"--rate must be > 0, got {rate}")
+        raise LvwsError(f"--rate must be > 0, got {rate}")
     path = Path(bag)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
@@ -65,7 +48,8 @@ def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[s
     try:
         with Reader(path) as reader:
             conns = [c for c in reader.connections if topics is None or c.topic in topics]
-            pubs = {c.id: node.create_publisher(message_class(c.msgtype), c.topic, qos_from_bag(c)) for c in conns}
+            pubs = {c.id: node.create_publisher(message_class(c.msgtype), c.topic, qos_from_bag(c, REPLAY_MIN_DEPTH))
+                    for c in conns}
             end = time.monotonic() + wait
             while time.monotonic() < end:
                 rclpy.spin_once(node, timeout_sec=0.05)
@@ -90,7 +74,7 @@ def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[s
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(user_args(sys.argv[1:] if argv is None else argv))
+    args = build_parser().parse_args(remove_ros_args(sys.argv[1:] if argv is None else argv))
     replay(args.bag, args.rate, args.wait_for_subscribers, args.topics)
     return 0
 

@@ -1,0 +1,238 @@
+"""``lvws`` commands on files: generate, solve, check, evaluate, gantt, train."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from lvws_ros.core.formats import dumps, load_instance
+from lvws_ros.core.problem import Instance
+from lvws_ros.errors import InstanceError
+from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
+
+# Heavy modules (ortools, matplotlib, torch) are imported inside the commands so that
+# `lvws --help` stays instant.
+
+
+def _instances(paths: Sequence[str]) -> list[Instance]:
+    files: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            files += sorted(f for f in p.rglob("*.json") if f.name != "manifest.json" and not f.name.startswith("."))
+        else:
+            files.append(p)
+    if not files:
+        raise InstanceError(f"no instance files found in {list(paths)}")
+    return [load_instance(f) for f in files]
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from lvws_ros.core.datasets import write_dataset
+
+    print(f"dataset {args.dataset}, seed {args.seed} -> {args.out}", file=sys.stderr)
+
+    def bar(items: Any, total: int) -> Any:
+        return tqdm(items, total=total, desc=f"dataset {args.dataset}", unit="inst")
+
+    counts = write_dataset(args.dataset, args.out, args.seed, args.count, progress=None if args.quiet else bar)
+    print(f"wrote {counts['train']} training and {counts['test']} test instances to {args.out}")
+    return 0
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    from lvws_ros.core.executor import simulate
+    from lvws_ros.core.formats import save_schedule, schedule_to_dict
+    from lvws_ros.registry import make_policy
+
+    inst = load_instance(args.instance)
+    options: dict[str, object] = {}
+    if args.policy == "exact":
+        options = {"time_limit": args.time_limit, "workers": args.workers}
+    elif args.policy in LEARNED_POLICIES:
+        options = {"model_path": args.model}
+    policy = make_policy(args.policy, seed=args.seed, **options)
+    result = simulate(inst, policy)
+    expert = getattr(policy, "result", None)
+    if expert is not None:
+        result.schedule.extra.update({"status": expert.status, "bound": expert.bound, "gap": expert.gap})
+        print(f"exact: {expert.status}, makespan {expert.makespan:g}, bound {expert.bound:g}, "
+              f"{expert.seconds:.2f} s", file=sys.stderr)
+    if args.out:
+        save_schedule(result.schedule, args.out)
+    sys.stdout.write(dumps(schedule_to_dict(result.schedule)))
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from lvws_ros.core.formats import load_schedule
+    from lvws_ros.core.schedule import check_schedule
+
+    inst = load_instance(args.instance)
+    sched = load_schedule(args.schedule)
+    problems = check_schedule(inst, sched)
+    if sched.instance != inst.name:
+        print(f"note: schedule is for instance {sched.instance!r}, checking against {inst.name!r}", file=sys.stderr)
+    if not problems:
+        print(f"valid: {len(sched.assignments)} assignments, makespan {sched.makespan:g}")
+        return 0
+    for p in problems:
+        print(p)
+    print(f"invalid: {len(problems)} violation(s) of rules {sorted({p.rule for p in problems})}")
+    return 1
+
+
+def _evaluate_paper(args: argparse.Namespace, chosen: list[str]) -> int:
+    from lvws_ros.cli.paper import POLICIES, reproduce
+
+    text = reproduce(Path(args.out_md), data_seed=args.data_seed, policy_seed=args.seed,
+                     time_limit=args.time_limit, table2_time_limit=args.table2_time_limit,
+                     workers=args.workers, limit=args.limit, cache_dir=Path(args.out_dir) / "paper-cache",
+                     progress=not args.quiet, policies=chosen or POLICIES)
+    print(text)
+    print(f"written: {args.out_md}", file=sys.stderr)
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from lvws_ros.cli.evaluation import expert_records
+    from lvws_ros.core.metrics import run_policy, summarize, to_csv, to_markdown
+    from lvws_ros.registry import make_policy
+
+    chosen = [p.strip() for p in (args.policies or "").split(",") if p.strip()]
+    if args.paper:
+        return _evaluate_paper(args, chosen)
+    if not args.instances:
+        raise InstanceError("give instance files or folders, or --paper")
+    instances = _instances(args.instances)
+    policies = chosen or ["rand", "rand_subteam", "grp", "lvws"]
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"{len(instances)} instances, policies {policies}, seed {args.seed}", file=sys.stderr)
+    experts = expert_records(instances, out / "expert_cache.json", args.time_limit, args.workers,
+                             progress=not args.quiet)
+    runs = [run_policy(inst, policy)
+            for policy in (make_policy(p, seed=args.seed) for p in policies)
+            for inst in tqdm(instances, desc=policy.name, disable=args.quiet, unit="inst")]
+    rows = summarize(runs, experts)
+    table = to_markdown(rows)
+    unproven = [e for e in experts.values() if e.status != "optimal"]
+    note = (f"\nExact solver: {len(experts) - len(unproven)}/{len(experts)} optima proven "
+            f"(time limit {args.time_limit:g} s, {args.workers} workers)")
+    if unproven:
+        gaps = [(e.makespan - e.bound) / e.makespan for e in unproven]
+        note += f"; {len(unproven)} without proof, mean gap {100 * sum(gaps) / len(gaps):.2f} % (left out of suboptimality)"
+    (out / "results.md").write_text(table + note + "\n")
+    (out / "results.csv").write_text(to_csv(rows))
+    print(table + note)
+    print(f"written: {out / 'results.md'}, {out / 'results.csv'}", file=sys.stderr)
+    return 0
+
+
+def cmd_gantt(args: argparse.Namespace) -> int:
+    from lvws_ros.cli.gantt import plot_gantt
+    from lvws_ros.core.formats import load_schedule
+
+    sched = load_schedule(args.schedule)
+    inst = load_instance(args.instance) if args.instance else None
+    print(plot_gantt(sched, args.out, inst))
+    return 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from lvws_ros.learning.gatn import GATNConfig
+    from lvws_ros.learning.training import PipelineConfig, TrainConfig, run_pipeline
+
+    model_cfg = GATNConfig(hidden=args.hidden, use_transformer=not args.dbgm)
+    train_cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, lam=args.lam,
+                            choice_weight=args.choice_weight, seed=args.seed, dbgm=args.dbgm, model=model_cfg)
+    cfg = PipelineConfig(datasets=tuple(args.datasets.split(",")), data_seed=args.data_seed, count=args.count,
+                         validation_per_dataset=args.validation, dagger_rounds=args.dagger_rounds,
+                         dagger_instances=args.dagger_instances, dagger_epochs=args.dagger_epochs,
+                         processes=args.processes, ray_address=args.ray_address, train=train_cfg)
+    run_pipeline(cfg, args.out, cache_dir=args.cache_dir, resume=args.resume, progress=not args.quiet)
+    return 0
+
+
+Adder = Any  # (name, function, help) -> argparse.ArgumentParser
+
+
+def add_parsers(add: Adder) -> None:
+    p = add("generate", cmd_generate, "write one of the paper's datasets as lvws-instance/1 files")
+    p.add_argument("--dataset", choices=["I", "II", "III"], required=True)
+    p.add_argument("--out", required=True, help="output folder (train/ and test/ inside)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--count", type=int, default=None, help="only the first COUNT instances")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    p = add("solve", cmd_solve, "schedule an instance with a policy; prints lvws-schedule/1 JSON")
+    p.add_argument("instance")
+    p.add_argument("--policy", choices=POLICY_NAMES, default="grp")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--time-limit", type=float, default=60.0, help="exact policy: CP-SAT time limit [s]")
+    p.add_argument("--workers", type=int, default=8, help="exact policy: CP-SAT workers")
+    p.add_argument("--model", default=None, help="lvws/dbgm policy: checkpoint (default: the shipped one)")
+    p.add_argument("--out", help="also write the schedule to this file")
+
+    p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")
+    p.add_argument("instance")
+    p.add_argument("schedule")
+
+    _add_evaluate(add)
+    _add_train(add)
+
+    p = add("gantt", cmd_gantt, "draw a schedule as a Gantt chart (PNG)")
+    p.add_argument("schedule")
+    p.add_argument("--instance", help="the instance, to show robots that never work")
+    p.add_argument("--out", required=True)
+
+
+def _add_evaluate(add: Adder) -> None:
+    p = add("evaluate", cmd_evaluate,
+            "policies x instances: mean makespan, suboptimality vs the exact solver, validity, decision time")
+    p.add_argument("instances", nargs="*", help="instance files or folders")
+    p.add_argument("--paper", action="store_true",
+                   help="regenerate the paper's Tables I and II on our datasets into --out-md")
+    p.add_argument("--out-md", default="docs/results.md", help="with --paper: the markdown report")
+    p.add_argument("--data-seed", type=int, default=0, help="with --paper: dataset seed")
+    p.add_argument("--limit", type=int, default=None, help="with --paper: first LIMIT test instances per dataset")
+    p.add_argument("--policies", default=None,
+                   help="comma-separated (default: rand,rand_subteam,grp,lvws; with --paper: all of Table I)")
+    p.add_argument("--table2-time-limit", type=float, default=30.0,
+                   help="with --paper: CP-SAT time limit per Dataset III instance [s]")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--time-limit", type=float, default=60.0, help="CP-SAT time limit per instance [s]")
+    p.add_argument("--workers", type=int, default=8, help="CP-SAT workers")
+    p.add_argument("--out-dir", default="results", help="results.md, results.csv and the expert cache go here")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _add_train(add: Adder) -> None:
+    p = add("train", cmd_train, "imitation learning of the GATN (Eq. 12) on expert demonstrations, with DAgger")
+    p.add_argument("--out", required=True, help="checkpoint to write (e.g. my_model.pt)")
+    p.add_argument("--datasets", default="I,II", help="training splits to use, comma-separated")
+    p.add_argument("--count", type=int, default=None, help="training instances per dataset (default: all)")
+    p.add_argument("--validation", type=int, default=100, help="held-out training instances per dataset")
+    p.add_argument("--data-seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="training seed")
+    p.add_argument("--epochs", type=int, default=20)
+    p.add_argument("--batch-size", type=int, default=64)
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--lam", type=float, default=0.1, help="lambda of Eq. 12")
+    p.add_argument("--choice-weight", type=float, default=1.0, help="per-robot choice term; 0: Eq. 12 alone")
+    p.add_argument("--hidden", type=int, default=64)
+    p.add_argument("--dbgm", action="store_true", help="the DBGM-style baseline: GAT only, no idle task")
+    p.add_argument("--dagger-rounds", type=int, default=2)
+    p.add_argument("--dagger-instances", type=int, default=1500)
+    p.add_argument("--dagger-epochs", type=int, default=6)
+    p.add_argument("--processes", type=int, default=2, help="parallel labelling processes")
+    p.add_argument("--ray-address", default=None, help="label on this Ray cluster ('local': a local Ray instance)")
+    p.add_argument("--cache-dir", default=None, help="keep expert demonstrations here between runs")
+    p.add_argument("--resume", default=None, help="continue from a training checkpoint (*.train.pt)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -1,0 +1,191 @@
+"""Report and verify recorded runs (``lvws report BAG``, ``lvws verify BAG``), ROS-free.
+
+The schedule comes from the bag alone: the last TaskGraph gives each task's subteam and
+start/end times (sim time); the executed instance takes the team's capabilities and
+payloads and each task's executed duration (end - start), so the rules of formats.md
+check subteam coverage (2), precedence (4), robot overlap (5) and makespan (6) of what
+really happened.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lvws_ros.core.executor import Decision, State, TaskStatus, voluntary_waits
+from lvws_ros.core.online import (
+    GraphSnapshot,
+    OnlineDecision,
+    OnlineScheduler,
+    TeamSnapshot,
+    build_instance,
+    build_state,
+    still_pending,
+)
+from lvws_ros.core.problem import Instance, Robot, Task
+from lvws_ros.core.schedule import Assignment, Schedule, Violation, check_schedule
+from lvws_ros.errors import BagError
+from lvws_ros.registry import LEARNED_POLICIES, make_policy
+from lvws_ros.ros.bag import Run, read_run
+
+
+@dataclass
+class RunReport:
+    bag: Path
+    instance: Instance
+    schedule: Schedule
+    complete: bool
+    problems: list[Violation]
+    decisions: int
+    policy: str
+    latency_ms_p50: float
+    latency_ms_p99: float
+    waits: list[tuple[int, float, tuple[str, ...]]]  # (step, sim time, robots told to wait)
+    subteams: list[tuple[str, tuple[str, ...]]]
+    topics: dict[str, int] = field(default_factory=dict)
+    # (step, sim time, robot -> ready tasks it could have started); None: inputs not in the bag
+    voluntary: list[tuple[int, float, dict[str, tuple[str, ...]]]] | None = None
+
+    def text(self) -> str:
+        lines = [f"bag: {self.bag}", f"policy: {self.policy}; decisions: {self.decisions}; decision latency "
+                 f"p50 {self.latency_ms_p50:.2f} ms, p99 {self.latency_ms_p99:.2f} ms",
+                 f"tasks done: {len(self.schedule.assignments)}/{self.instance.num_tasks}"
+                 + ("" if self.complete else " (incomplete run)"),
+                 f"makespan: {self.schedule.makespan:.2f} s (sim time)",
+                 "valid by formats.md: " + ("yes" if not self.problems else
+                                            "NO: " + "; ".join(str(p) for p in self.problems)),
+                 "", "| task | robots | start | end |", "|---|---|---|---|"]
+        lines += [f"| {a.task} | {'+'.join(a.robots)} | {a.start:.2f} | {a.end:.2f} |" for a in self.schedule.assignments]
+        lines += ["", "subteams: " + (", ".join(f"{t} <- {'+'.join(r)}" for t, r in self.subteams) or "none")]
+        waits = [f"step {s} (t={t:.2f}): {', '.join(r)}" for s, t, r in self.waits]
+        lines += ["robots told to wait: " + ("; ".join(waits) if waits else "none")]
+        if self.voluntary is None:
+            lines += ["voluntary waits: unknown (the decisions' inputs are not all in the bag)"]
+        else:
+            vol = [f"step {s} (t={t:.2f}): " + ", ".join(f"{r} (could start {'/'.join(ts)})" for r, ts in w.items())
+                   for s, t, w in self.voluntary]
+            lines += ["voluntary waits (free, and a ready task they could start now): "
+                      + ("; ".join(vol) if vol else "none")]
+        return "\n".join(lines)
+
+
+def executed(team: TeamSnapshot, graph: GraphSnapshot, name: str = "run") -> tuple[Instance, Schedule]:
+    """The executed instance and schedule of the tasks started so far."""
+    robots = tuple(Robot(r.id, tuple(r.capabilities), r.payload) for r in team.robots)
+    tasks, out = [], []
+    for t in graph.tasks:
+        duration = t.duration
+        if t.status == TaskStatus.DONE and t.start is not None and t.end is not None:
+            duration = t.end - t.start
+            out.append(Assignment(t.id, tuple(t.assigned_robots), t.start, t.end))
+        tasks.append(Task(t.id, tuple(t.capabilities), t.payload, max(duration, 1e-9), tuple(t.prerequisites)))
+    inst = Instance(name, tuple(graph.capability_names), robots, tuple(tasks))
+    return inst, Schedule.from_assignments(name, "", out)
+
+
+def report_run(run: Run) -> RunReport:
+    if not run.teams or not run.graphs:
+        raise BagError(f"{run.path}: no team state or task graph recorded")
+    team, graph = run.teams[-1], run.graphs[-1]
+    inst, sched = executed(team, graph, run.path.name)
+    policy = run.decisions[0].policy if run.decisions else "?"
+    sched.policy = policy
+    sched.decisions = len(run.decisions)
+    complete = all(t.status == TaskStatus.DONE for t in graph.tasks)
+    problems = check_schedule(inst, sched) if complete else []
+    lat = [1000 * d.latency for d in run.decisions] or [float("nan")]
+    waits = [(d.step, max(d.team_stamp, d.graph_stamp), d.waiting) for d in run.decisions if d.waiting]
+    subteams = [(t, r) for d in run.decisions for t, r in d.assignments if len(r) > 1]
+    return RunReport(run.path, inst, sched, complete, problems, len(run.decisions), policy,
+                     statistics.median(lat), float(np.percentile(lat, 99)), waits, subteams, run.topics,
+                     recorded_voluntary_waits(run))
+
+
+def recorded_voluntary_waits(run: Run) -> list[tuple[int, float, dict[str, tuple[str, ...]]]] | None:
+    """The voluntary waits of each recorded decision, judged in the state it was made in."""
+    out = []
+    try:
+        for d, _, _, state in decision_inputs(run):
+            inst = state.instance
+            known = [(inst.task_index[t], tuple(inst.robot_index[r] for r in rs)) for t, rs in d.assignments
+                     if t in inst.task_index and all(r in inst.robot_index for r in rs)]
+            vol = voluntary_waits(state, Decision(tuple(known)))
+            if vol:
+                out.append((d.step, state.time, {inst.robots[r].id: tuple(inst.tasks[j].id for j in ts)
+                                                 for r, ts in vol.items()}))
+    except BagError:
+        return None
+    return out
+
+
+def report(bag: str | Path, gantt_png: str | Path | None = None) -> RunReport:
+    """Read a bag, rebuild and check its schedule, and draw its Gantt chart if asked."""
+    rep = report_run(read_run(bag))
+    if gantt_png is not None and rep.schedule.assignments:
+        from lvws_ros.cli.gantt import plot_gantt
+
+        plot_gantt(rep.schedule, gantt_png, rep.instance,
+                   title=f"{rep.policy}: makespan {rep.schedule.makespan:.2f} s ({Path(bag).name})")
+    return rep
+
+
+@dataclass
+class Mismatch:
+    step: int
+    recorded: tuple[tuple[tuple[str, tuple[str, ...]], ...], tuple[str, ...]]
+    replayed: tuple[tuple[tuple[str, tuple[str, ...]], ...], tuple[str, ...]]
+
+
+def decision_inputs(run: Run, ack_timeout: float = 5.0) -> Iterator[tuple[OnlineDecision, TeamSnapshot, GraphSnapshot, State]]:
+    """Each recorded decision with the TeamState and TaskGraph it names and the executor
+    state the scheduler built from them (tasks assigned but not yet acknowledged by the
+    simulator count as running, as in the node)."""
+    # A stamp names the first snapshot taken at that instant: a paused (sync) simulator
+    # republishes at the same sim time once it has executed the decision.
+    teams: dict[float, TeamSnapshot] = {}
+    graphs: dict[float, GraphSnapshot] = {}
+    for t in run.teams:
+        teams.setdefault(round(t.stamp, 6), t)
+    for g in run.graphs:
+        graphs.setdefault(round(g.stamp, 6), g)
+    pending: dict[str, tuple[tuple[str, ...], float]] = {}
+    inst: Instance | None = None
+    for d in sorted(run.decisions, key=lambda d: d.step):
+        team, graph = teams.get(round(d.team_stamp, 6)), graphs.get(round(d.graph_stamp, 6))
+        if team is None or graph is None:
+            raise BagError(f"{run.path}: decision {d.step} names inputs the bag does not hold "
+                           f"(team {d.team_stamp}, graph {d.graph_stamp})")
+        if inst is None:
+            inst = build_instance(team, graph)
+        now = max(team.stamp, graph.stamp)
+        pending = still_pending(pending, graph, now, ack_timeout)
+        yield d, team, graph, build_state(inst, team, graph, {k: v[0] for k, v in pending.items()})
+        for task, robots in d.assignments:
+            pending[task] = (tuple(robots), now)
+
+
+def verify(bag: str | Path, *, policy: str | None = None, seed: int = 0, model_path: str | None = None,
+           ack_timeout: float = 5.0) -> tuple[int, list[Mismatch]]:
+    """Feed each recorded decision's inputs (the TeamState and TaskGraph it names) to the
+    scheduler core offline; return (decisions checked, those that differ)."""
+    run = read_run(bag)
+    if not run.decisions:
+        raise BagError(f"{run.path}: no decisions recorded on /lvws/assignments")
+    name = policy or run.decisions[0].policy
+    options = {"model_path": model_path} if name in LEARNED_POLICIES and model_path else {}
+    online = OnlineScheduler(make_policy(name, seed=seed, **options), ack_timeout)
+    bad: list[Mismatch] = []
+    for k, (d, team, graph, state) in enumerate(decision_inputs(run, ack_timeout)):
+        if k == 0:
+            online.policy.reset(state.instance)
+        online.team, online.graph = team, graph
+        got = online.decide_state(state)
+        rec = (tuple(sorted((t, tuple(r)) for t, r in d.assignments)), tuple(sorted(d.waiting)))
+        new = (tuple(sorted(got.assignments)), tuple(sorted(got.waiting)))
+        if rec != new:
+            bad.append(Mismatch(d.step, rec, new))
+    return len(run.decisions), bad

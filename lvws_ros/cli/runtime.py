@@ -1,0 +1,148 @@
+"""``lvws`` commands of the case study and of recorded runs: sim, launch, report,
+verify, replay (``lvws scheduler`` is the node itself, see :mod:`lvws_ros.cli.main`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from lvws_ros.errors import LaunchError
+from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    from lvws_ros.core.formats import save_schedule
+    from lvws_ros.core.schedule import check_schedule
+    from lvws_ros.registry import make_policy
+    from lvws_ros.ros.resources import case_study_config
+    from lvws_ros.sim.config import load_cell_config
+    from lvws_ros.sim.runner import run_offline
+    from lvws_ros.sim.world import CellSim
+
+    sim = CellSim(load_cell_config(args.config or case_study_config()))
+    options = {"model_path": args.model} if args.model and args.policy in LEARNED_POLICIES else {}
+    sched, decisions = run_offline(sim, make_policy(args.policy, seed=args.seed, **options),
+                                   frame_every=args.frame_every if args.gif or args.frames else None)
+    problems = check_schedule(sim.executed_instance(), sched)
+    print(f"{args.policy}: makespan {sched.makespan:.2f} s, {len(decisions)} decisions, "
+          f"valid: {'yes' if not problems else problems}")
+    for d in decisions:
+        made = ", ".join(f"{t}<-{'+'.join(r)}" for t, r in d.assignments) or "-"
+        print(f"  step {d.step} t={d.team_stamp:.2f}: {made}; waiting {', '.join(d.waiting) or '-'}")
+    if args.out:
+        save_schedule(sched, args.out)
+    if args.gif:
+        from lvws_ros.sim.render import render_gif
+
+        print(render_gif(sim.cfg, sim.trace, sim.inst.num_tasks, args.gif))
+    if args.frames:
+        from lvws_ros.sim.render import render_frames
+
+        paths = render_frames(sim.cfg, sim.trace, sim.inst.num_tasks, args.frames)
+        print(f"{len(paths)} PNG frames in {args.frames}")
+    return 0 if not problems else 1
+
+
+def cmd_launch(args: argparse.Namespace) -> int:
+    from lvws_ros.cli.report import report
+    from lvws_ros.ros.launcher import launch
+
+    try:
+        res = launch(policy=args.policy, seed=args.seed, model_path=args.model or "", rate=args.rate,
+                     config=args.config or "", bag_dir=args.bag_dir, out_dir=args.out_dir, name=args.name,
+                     params_file=args.params_file, gif=not args.no_gif, timeout=args.timeout,
+                     sync=not args.no_sync)
+    except LaunchError as exc:
+        print(f"lvws launch: failed: {exc}", file=sys.stderr)
+        return 1
+    gantt = res.out_dir / "gantt.png"
+    s = res.summary
+    print(report(res.bag, gantt).text())
+    print()
+    print(f"makespan:  {s.get('makespan')} s (sim time), {s.get('tasks_done')}/{s.get('tasks')} tasks")
+    print(f"decisions: {s.get('decisions_received')}")
+    print(f"wall time: {s.get('wall_seconds_total', 0):.1f} s")
+    print(f"bag:       {res.bag}")
+    print(f"gantt:     {gantt}")
+    print(f"gif:       {res.gif}")
+    print(f"logs:      {res.out_dir}")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from lvws_ros.cli.report import report
+
+    out = args.gantt or str(Path(args.bag).with_name(Path(args.bag).name + "-gantt.png"))
+    rep = report(args.bag, out)
+    print(rep.text())
+    print(f"gantt: {out}")
+    return 0 if rep.complete and not rep.problems else 1
+
+
+def cmd_verify(args: argparse.Namespace) -> int:
+    from lvws_ros.cli.report import verify
+
+    n, bad = verify(args.bag, policy=args.policy, seed=args.seed, model_path=args.model)
+    for m in bad:
+        print(f"step {m.step}: recorded {m.recorded}, offline {m.replayed}")
+    print(f"{n - len(bad)}/{n} decisions reproduced" + (" (deterministic replay: ok)" if not bad else ""))
+    return 0 if not bad else 1
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from lvws_ros.ros.replay import replay
+
+    replay(args.bag, args.rate, args.wait_for_subscribers, args.topics)
+    return 0
+
+
+Adder = Any  # (name, function, help) -> argparse.ArgumentParser
+
+
+def add_parsers(add: Adder) -> None:
+    p = add("sim", cmd_sim, "run the assembly-cell case study in-process with a policy (no ROS)")
+    p.add_argument("--policy", choices=POLICY_NAMES, default="lvws")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--model", default=None, help="lvws/dbgm checkpoint (default: the shipped one)")
+    p.add_argument("--config", default=None, help="assembly-cell YAML (default: config/assembly_cell.yaml)")
+    p.add_argument("--out", help="write the executed schedule (lvws-schedule/1) here")
+    p.add_argument("--gif", help="write an animated GIF of the run here")
+    p.add_argument("--frames", help="write a PNG per frame into this folder")
+    p.add_argument("--frame-every", type=float, default=2.0, help="sim seconds between frames")
+
+    p = add("launch", cmd_launch, "the case study on ROS 2: cell_sim + scheduler + recorder, then a summary")
+    p.add_argument("--policy", choices=POLICY_NAMES, default="lvws")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--model", default=None, help="lvws/dbgm checkpoint (default: the shipped one)")
+    p.add_argument("--rate", type=float, default=20.0, help="sim time / wall time")
+    p.add_argument("--config", default=None, help="assembly-cell YAML (default: config/assembly_cell.yaml)")
+    p.add_argument("--params-file", default=None, help="scheduler parameters (e.g. config/scheduler.yaml)")
+    p.add_argument("--bag-dir", default="bags")
+    p.add_argument("--out-dir", default="out", help="Gantt PNG, GIF, summary and logs go to OUT_DIR/<run>")
+    p.add_argument("--name", default=None, help="run name (default: case-study-<policy>-<time>)")
+    p.add_argument("--no-gif", action="store_true")
+    p.add_argument("--no-sync", action="store_true",
+                   help="free-running world: it does not pause at decision steps, so decision latency costs sim time")
+    p.add_argument("--timeout", type=float, default=600.0, help="wall seconds before giving up")
+
+    # main() hands `lvws scheduler ...` to the node; this parser only serves --help
+    p = add("scheduler", None, "the scheduler node (same as `ros2 run lvws_ros scheduler`)")
+    p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args ... for rclpy")
+
+    p = add("report", cmd_report, "makespan, assignments and a Gantt chart of a recorded run, from the bag alone")
+    p.add_argument("bag")
+    p.add_argument("--gantt", default=None, help="PNG path (default: next to the bag)")
+
+    p = add("verify", cmd_verify, "re-run the scheduler offline on a bag's inputs; exit 0 when it decides the same")
+    p.add_argument("bag")
+    p.add_argument("--policy", choices=POLICY_NAMES, default=None, help="default: the recorded one")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--model", default=None)
+
+    p = add("replay", cmd_replay, "republish a bag's messages with the recorded timing and QoS")
+    p.add_argument("bag")
+    p.add_argument("--rate", type=float, default=1.0)
+    p.add_argument("--wait-for-subscribers", type=float, default=2.0)
+    p.add_argument("--topics", nargs="*", default=None)

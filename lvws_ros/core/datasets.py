@@ -1,0 +1,129 @@
+"""Dataset generators for the LVWS paper's three datasets (section IV-A).
+
+Every instance follows the paper's recipe:
+  * 2 or 3 capabilities (uniform); each robot a random non-zero capability vector, and
+    every capability held by at least one robot;
+  * robot payload capacity: integer, uniform in 1..30;
+  * task payload need: Poisson(TASK_PAYLOAD_MEAN) clipped to 1..30, redrawn while it
+    exceeds the whole team's payload (so every task is coverable);
+  * task capability need: a random non-zero vector;
+  * task duration (our choice, the paper gives none): integer, uniform in 1..10 s;
+  * prerequisites: a random DAG; task j takes 0, 1 or 2 prerequisites (probabilities
+    PREREQ_PROBS) drawn uniformly among tasks 0..j-1.
+
+Instance ``k`` of a dataset is drawn from ``numpy.random.default_rng([seed, dataset, k])``,
+so every instance is reproducible on its own and the files are byte-identical for a seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lvws_ros.core.formats import dumps, save_instance
+from lvws_ros.core.problem import Instance, Robot, Task
+
+TASK_PAYLOAD_MEAN = 10.0
+PAYLOAD_RANGE = (1, 30)
+DURATION_RANGE = (1, 10)
+PREREQ_PROBS = (0.35, 0.40, 0.25)
+CAPABILITY_NAMES = ("manipulation", "mobility", "sensing")
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    key: str
+    code: int
+    count: int
+    train: int
+    robots: tuple[int, int]
+    tasks: tuple[int, int]
+    description: str
+
+
+DATASETS = {
+    "I": DatasetSpec("I", 1, 1000, 800, (6, 6), (18, 18), "6 robots, 18 tasks (6r-18t)"),
+    "II": DatasetSpec("II", 2, 10000, 8000, (3, 8), (8, 20), "3-8 robots, 8-20 tasks (8r-20t-var)"),
+    "III": DatasetSpec("III", 3, 20, 0, (6, 6), (100, 100), "6 robots, 100 tasks (6r-100t)"),
+}
+
+
+def _nonzero_vector(rng: np.random.Generator, k: int) -> tuple[int, ...]:
+    while True:
+        v = rng.integers(0, 2, size=k)
+        if v.any():
+            return tuple(int(x) for x in v)
+
+
+def random_instance(rng: np.random.Generator, num_robots: int, num_tasks: int, name: str,
+                    num_capabilities: int | None = None) -> Instance:
+    """One feasible instance drawn as described in the module docstring."""
+    k = int(rng.integers(2, 4)) if num_capabilities is None else num_capabilities
+    while True:
+        robot_caps = [_nonzero_vector(rng, k) for _ in range(num_robots)]
+        if np.array(robot_caps).any(axis=0).all():
+            break
+    payloads = rng.integers(PAYLOAD_RANGE[0], PAYLOAD_RANGE[1] + 1, size=num_robots)
+    robots = tuple(
+        Robot(f"r{i}", robot_caps[i], float(payloads[i])) for i in range(num_robots)
+    )
+    total = float(payloads.sum())
+    tasks = []
+    for j in range(num_tasks):
+        caps = _nonzero_vector(rng, k)
+        while True:
+            need = float(np.clip(rng.poisson(TASK_PAYLOAD_MEAN), *PAYLOAD_RANGE))
+            if need <= total:
+                break
+        duration = float(rng.integers(DURATION_RANGE[0], DURATION_RANGE[1] + 1))
+        n_pre = min(j, int(rng.choice(len(PREREQ_PROBS), p=PREREQ_PROBS)))
+        pre = sorted(int(p) for p in rng.choice(j, size=n_pre, replace=False)) if n_pre else []
+        tasks.append(Task(f"t{j}", caps, need, duration, tuple(f"t{p}" for p in pre)))
+    return Instance(name, CAPABILITY_NAMES[:k], robots, tuple(tasks))
+
+
+def dataset_instance(spec: DatasetSpec, index: int, seed: int) -> Instance:
+    rng = np.random.default_rng([seed, spec.code, index])
+    n = int(rng.integers(spec.robots[0], spec.robots[1] + 1))
+    m = int(rng.integers(spec.tasks[0], spec.tasks[1] + 1))
+    return random_instance(rng, n, m, f"{n}r-{m}t-{spec.key}-{index:05d}")
+
+
+def iter_dataset(key: str, seed: int, count: int | None = None) -> Iterator[tuple[str, Instance]]:
+    """(split, instance) pairs of dataset ``key``; the first ``spec.train`` are training."""
+    spec = DATASETS[key]
+    for index in range(spec.count if count is None else min(count, spec.count)):
+        yield ("train" if index < spec.train else "test"), dataset_instance(spec, index, seed)
+
+
+def write_dataset(key: str, out_dir: str | Path, seed: int, count: int | None = None,
+                  progress: Callable[[Iterable[Any], int], Iterable[Any]] | None = None) -> dict[str, int]:
+    """Write dataset ``key`` as lvws-instance/1 files under out_dir/{train,test}/;
+    ``progress(items, total)`` may wrap the loop (a progress bar)."""
+    spec = DATASETS[key]
+    out = Path(out_dir)
+    counts = {"train": 0, "test": 0}
+    total = spec.count if count is None else min(count, spec.count)
+    items: Iterable[tuple[str, Instance]] = iter_dataset(key, seed, count)
+    for split, inst in (progress(items, total) if progress else items):
+        (out / split).mkdir(parents=True, exist_ok=True)
+        save_instance(inst, out / split / f"{inst.name}.json")
+        counts[split] += 1
+    manifest = {
+        "dataset": key,
+        "description": spec.description,
+        "seed": seed,
+        "counts": counts,
+        "generator": {
+            "task_payload_mean": TASK_PAYLOAD_MEAN,
+            "payload_range": list(PAYLOAD_RANGE),
+            "duration_range": list(DURATION_RANGE),
+            "prereq_probs": list(PREREQ_PROBS),
+        },
+    }
+    (out / "manifest.json").write_text(dumps(manifest), encoding="utf-8")
+    return counts

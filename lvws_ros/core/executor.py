@@ -1,0 +1,264 @@
+"""Event-driven schedule executor (LVWS paper, section III-A).
+
+Decision steps happen at time 0 and whenever a task finishes. At each step the policy
+sees the state vectors of the paper (robot availability a^r; task ready / assigned /
+incomplete s^t) and returns subteam assignments of free robots to ready tasks; free
+robots it leaves out take the idle task t_{M+1} (they wait until the next step).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.schedule import Assignment, Schedule
+from lvws_ros.core.subteams import TOLERANCE, FloatArray, covers, team_candidates
+from lvws_ros.errors import PolicyError
+
+
+class TaskStatus(IntEnum):
+    """Values match lvws_msgs/Task STATUS_* constants."""
+
+    QUEUED = 0
+    READY = 1
+    ASSIGNED = 2
+    DONE = 3
+
+
+@dataclass
+class State:
+    """What a policy sees at a decision step (also a mid-run state for the expert)."""
+
+    instance: Instance
+    time: float
+    robot_free_at: FloatArray  # (N,) time each robot becomes free
+    task_status: npt.NDArray[np.int8]  # (M,) TaskStatus
+    task_start: FloatArray  # (M,) nan until started
+    task_team: list[tuple[int, ...]]  # robots of each started task
+    step: int = 0
+
+    @classmethod
+    def initial(cls, inst: Instance) -> State:
+        m = inst.num_tasks
+        state = cls(
+            instance=inst,
+            time=0.0,
+            robot_free_at=np.zeros(inst.num_robots),
+            task_status=np.full(m, TaskStatus.QUEUED, dtype=np.int8),
+            task_start=np.full(m, np.nan),
+            task_team=[() for _ in range(m)],
+        )
+        state.refresh()
+        return state
+
+    @property
+    def task_end(self) -> FloatArray:
+        return self.task_start + self.instance.durations
+
+    def robot_available(self) -> npt.NDArray[np.bool_]:
+        """a^r: robots free at the current time."""
+        return self.robot_free_at <= self.time + TOLERANCE
+
+    def free_robots(self) -> list[int]:
+        return [int(i) for i in np.flatnonzero(self.robot_available())]
+
+    def ready_tasks(self) -> list[int]:
+        return [int(j) for j in np.flatnonzero(self.task_status == TaskStatus.READY)]
+
+    def task_state_vectors(self) -> npt.NDArray[np.float32]:
+        """s^t = [ready, assigned, incomplete] per task (section III-A)."""
+        s = self.task_status
+        return np.stack(
+            [s == TaskStatus.READY, s == TaskStatus.ASSIGNED, s != TaskStatus.DONE], axis=1
+        ).astype(np.float32)
+
+    def busy_remaining(self) -> FloatArray:
+        return np.maximum(self.robot_free_at - self.time, 0.0)
+
+    def done(self) -> bool:
+        return bool(np.all(self.task_status == TaskStatus.DONE))
+
+    def refresh(self) -> None:
+        """Finish tasks whose end has come, then mark tasks with all prerequisites done ready."""
+        inst = self.instance
+        running = self.task_status == TaskStatus.ASSIGNED
+        finished = running & (self.task_end <= self.time + TOLERANCE)
+        self.task_status[finished] = TaskStatus.DONE
+        done = self.task_status == TaskStatus.DONE
+        for j in np.flatnonzero(self.task_status == TaskStatus.QUEUED):
+            if all(done[p] for p in inst.prerequisites[j]):
+                self.task_status[j] = TaskStatus.READY
+
+    def start(self, task: int, team: Sequence[int]) -> None:
+        self.task_status[task] = TaskStatus.ASSIGNED
+        self.task_start[task] = self.time
+        self.task_team[task] = tuple(sorted(team))
+        self.robot_free_at[list(team)] = self.time + self.instance.durations[task]
+
+    def next_event_time(self) -> float | None:
+        running = self.task_status == TaskStatus.ASSIGNED
+        if not running.any():
+            return None
+        return float(self.task_end[running].min())
+
+    def copy(self) -> State:
+        return State(
+            instance=self.instance,
+            time=self.time,
+            robot_free_at=self.robot_free_at.copy(),
+            task_status=self.task_status.copy(),
+            task_start=self.task_start.copy(),
+            task_team=list(self.task_team),
+            step=self.step,
+        )
+
+
+@dataclass(frozen=True)
+class Decision:
+    """Subteam assignments (task index, robot indices) and the robots that wait."""
+
+    assignments: tuple[tuple[int, tuple[int, ...]], ...] = ()
+    waiting: tuple[int, ...] = ()
+
+
+class Policy(Protocol):
+    name: str
+
+    def reset(self, instance: Instance) -> None: ...
+
+    def decide(self, state: State) -> Decision: ...
+
+
+@dataclass
+class StepRecord:
+    time: float
+    free_robots: tuple[int, ...]
+    ready_tasks: tuple[int, ...]
+    decision: Decision
+    seconds: float
+    state: State | None = None
+
+
+@dataclass
+class SimulationResult:
+    schedule: Schedule
+    steps: list[StepRecord] = field(default_factory=list)
+
+
+def check_decision(state: State, decision: Decision, policy: str = "policy") -> None:
+    """Raise PolicyError unless the decision obeys Eqs. 8-11 in this state."""
+    inst = state.instance
+    free = state.robot_available()
+    used: set[int] = set()
+    seen_tasks: set[int] = set()
+    for task, team in decision.assignments:
+        if not 0 <= task < inst.num_tasks:
+            raise PolicyError(f"{policy}: unknown task index {task}")
+        tid = inst.tasks[task].id
+        if state.task_status[task] != TaskStatus.READY:
+            raise PolicyError(f"{policy}: task {tid!r} is not ready (status {TaskStatus(state.task_status[task]).name})")
+        if task in seen_tasks:
+            raise PolicyError(f"{policy}: task {tid!r} assigned twice in one step")
+        seen_tasks.add(task)
+        if not team:
+            raise PolicyError(f"{policy}: task {tid!r} assigned to an empty subteam")
+        for r in team:
+            if not 0 <= r < inst.num_robots:
+                raise PolicyError(f"{policy}: unknown robot index {r}")
+            if not free[r]:
+                raise PolicyError(f"{policy}: robot {inst.robots[r].id!r} is busy until {state.robot_free_at[r]:g}")
+            if r in used:
+                raise PolicyError(f"{policy}: robot {inst.robots[r].id!r} given two tasks (Eq. 9)")
+            used.add(r)
+        idx = list(team)
+        if not covers(inst.robot_caps[idx], inst.robot_payload[idx], inst.task_caps[task], inst.tasks[task].payload):
+            raise PolicyError(f"{policy}: subteam {[inst.robots[r].id for r in team]} does not cover task {tid!r} (Eqs. 10-11)")
+
+
+def voluntary_waits(state: State, decision: Decision) -> dict[int, tuple[int, ...]]:
+    """Robots the decision keeps waiting although they could start a ready task now.
+
+    A wait is voluntary (the paper's behaviour, section III-A) when some ready task the
+    decision leaves unassigned has a covering subteam (Eqs. 10-11) among the robots it
+    leaves free that includes the robot. Returns robot index -> those task indices.
+    """
+    inst = state.instance
+    taken = {r for _, team in decision.assignments for r in team}
+    left = [r for r in state.free_robots() if r not in taken]
+    started = {task for task, _ in decision.assignments}
+    out: dict[int, list[int]] = {}
+    if not left:
+        return {}
+    for j in state.ready_tasks():
+        if j in started:
+            continue
+        for team in team_candidates(inst.robot_caps[left], inst.robot_payload[left], inst.task_caps[j],
+                                    inst.tasks[j].payload):
+            for k in team:
+                if j not in out.setdefault(left[k], []):
+                    out[left[k]].append(j)
+    return {r: tuple(ts) for r, ts in sorted(out.items())}
+
+
+def simulate(
+    inst: Instance,
+    policy: Policy,
+    *,
+    record_states: bool = False,
+    state: State | None = None,
+    max_steps: int | None = None,
+) -> SimulationResult:
+    """Run ``policy`` on ``inst`` from time 0 (or from ``state``) until every task is done."""
+    policy.reset(inst)
+    state = State.initial(inst) if state is None else state.copy()
+    steps: list[StepRecord] = []
+    compute = 0.0
+    limit = max_steps if max_steps is not None else 4 * (inst.num_tasks + 1) * (inst.num_robots + 1)
+    while not state.done():
+        if len(steps) >= limit:
+            raise PolicyError(f"{policy.name}: no schedule after {limit} decision steps")
+        snapshot = state.copy() if record_states else None
+        t0 = time.perf_counter()
+        decision = policy.decide(state)
+        seconds = time.perf_counter() - t0
+        compute += seconds
+        check_decision(state, decision, policy.name)
+        steps.append(
+            StepRecord(state.time, tuple(state.free_robots()), tuple(state.ready_tasks()), decision, seconds, snapshot)
+        )
+        for task, team in decision.assignments:
+            state.start(task, team)
+        nxt = state.next_event_time()
+        if nxt is None:
+            free = [inst.robots[r].id for r in state.free_robots()]
+            ready = [inst.tasks[j].id for j in state.ready_tasks()]
+            raise PolicyError(
+                f"{policy.name}: no progress at t={state.time:g}: nothing is running and no task was "
+                f"started (free robots {free}, ready tasks {ready})"
+            )
+        state.time = nxt
+        state.step += 1
+        state.refresh()
+    return SimulationResult(schedule_from_state(state, policy.name, len(steps), compute), steps)
+
+
+def schedule_from_state(state: State, policy: str, decisions: int = 0, compute: float = 0.0) -> Schedule:
+    inst = state.instance
+    out = [
+        Assignment(
+            task=t.id,
+            robots=tuple(inst.robots[r].id for r in state.task_team[j]),
+            start=float(state.task_start[j]),
+            end=float(state.task_start[j] + t.duration),
+        )
+        for j, t in enumerate(inst.tasks)
+        if not np.isnan(state.task_start[j])
+    ]
+    return Schedule.from_assignments(inst.name, policy, out, decisions, compute)

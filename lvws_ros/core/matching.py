@@ -1,0 +1,118 @@
+"""Constrained bipartite matching with subteams and an idle task (LVWS paper, Eqs. 7-11).
+
+Given a reward matrix R of shape n x (m+1) over the n free robots and m ready tasks,
+whose last column is the idle task t_{M+1}, choose the scheduling matrix A maximising
+sum_ij A_ij R_ij (Eq. 7) such that each robot takes one task or waits (Eq. 9) and every
+task that receives robots is covered: the OR of their capabilities contains the task's
+(Eq. 10) and their payloads add up to its need (Eq. 11).
+
+:func:`greedy_match` is the paper's sequential greedy (section III-D), vectorised;
+:func:`lvws_ros.policies.exact.exact_match` solves the same problem with CP-SAT for
+small cases.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lvws_ros.core.subteams import BoolArray, FloatArray, covered, covers, helps
+from lvws_ros.errors import PolicyError
+
+
+@dataclass(frozen=True)
+class Match:
+    """Result of a matching: task column -> robot rows, rows that wait, and the reward."""
+
+    teams: dict[int, tuple[int, ...]]
+    waiting: tuple[int, ...]
+    reward: float
+
+
+def check_shapes(r: FloatArray, robot_caps: BoolArray, robot_payload: FloatArray,
+                  task_caps: BoolArray, task_payload: FloatArray) -> tuple[int, int]:
+    n, m = robot_caps.shape[0], task_caps.shape[0]
+    if r.shape != (n, m + 1):
+        raise ValueError(f"reward matrix has shape {r.shape}, expected ({n}, {m + 1}) (last column: idle task)")
+    if robot_payload.shape != (n,) or task_payload.shape != (m,):
+        raise ValueError("payload vectors do not match the capability matrices")
+    if robot_caps.shape[1] != task_caps.shape[1]:
+        raise ValueError("robots and tasks have different numbers of capabilities")
+    if not np.all(np.isfinite(r)):
+        raise PolicyError("reward matrix holds NaN or infinite values")
+    return n, m
+
+
+def match_reward(r: FloatArray, teams: dict[int, tuple[int, ...]], waiting: tuple[int, ...]) -> float:
+    m = r.shape[1] - 1
+    return float(sum(r[i, j] for j, team in teams.items() for i in team) + sum(r[i, m] for i in waiting))
+
+
+def greedy_match(
+    r: FloatArray,
+    robot_caps: BoolArray,
+    robot_payload: FloatArray,
+    task_caps: BoolArray,
+    task_payload: FloatArray,
+) -> Match:
+    """Sequential greedy for Eqs. 7-11.
+
+    Repeatedly takes the largest reward among (free robot, open task) pairs in which the
+    robot still helps the task (adds a missing capability or missing payload) and
+    (free robot, idle task). A robot picked for a task joins its partial subteam; the
+    task closes once covered, and members made redundant by later ones are released,
+    so subteams are inclusion-minimal. A partial subteam that the remaining free robots can no
+    longer complete releases its robots, which go back into the matching. Each pick
+    is one vectorised argmax over n x (m+1): O(n * m) per pick, O(n^2 m) worst case.
+    """
+    n, m = check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
+    free = np.ones(n, dtype=bool)
+    waiting = np.zeros(n, dtype=bool)
+    open_task = np.ones(m, dtype=bool)
+    missing_caps = task_caps.copy()
+    missing_payload = task_payload.astype(np.float64).copy()
+    member = np.zeros((n, m), dtype=bool)
+    closed_teams: dict[int, tuple[int, ...]] = {}
+    while True:
+        # A task is completable when its missing capabilities and payload can still come
+        # from free robots. A partial subteam that cannot be completed releases its robots
+        # (one task at a time, since released robots may complete another).
+        free_caps = robot_caps[free].any(axis=0) if free.any() else np.zeros(task_caps.shape[1], bool)
+        free_payload = float(robot_payload[free].sum())
+        completable = covered(free_caps, free_payload, missing_caps, missing_payload)
+        dead = np.flatnonzero(open_task & ~completable & member.any(axis=0))
+        if len(dead):
+            j = int(dead[0])
+            free |= member[:, j]
+            member[:, j] = False
+            open_task[j] = False
+            continue
+        if not free.any():
+            break
+        ok = free[:, None] & (open_task & completable)[None, :] & helps(robot_caps, missing_caps, missing_payload)
+        scores = np.where(ok, r[:, :m], -np.inf)
+        idle = np.where(free, r[:, m], -np.inf)
+        flat = int(np.argmax(np.concatenate([scores, idle[:, None]], axis=1)))
+        i, j = divmod(flat, m + 1)
+        free[i] = False
+        if j == m:
+            waiting[i] = True
+            continue
+        member[i, j] = True
+        missing_caps[j] &= ~robot_caps[i]
+        missing_payload[j] -= robot_payload[i]
+        if covered(np.zeros_like(missing_caps[j]), 0.0, missing_caps[j], missing_payload[j]):
+            # Members made redundant by later ones go back to the pool, cheapest first,
+            # so every closed subteam is inclusion-minimal.
+            team = [int(x) for x in np.flatnonzero(member[:, j])]
+            for q in sorted(team, key=lambda q: r[q, j]):
+                rest = [x for x in team if x != q]
+                if rest and covers(robot_caps[rest], robot_payload[rest], task_caps[j], task_payload[j]):
+                    team = rest
+                    member[q, j] = False
+                    free[q] = True
+            open_task[j] = False
+            closed_teams[j] = tuple(team)
+    wait = tuple(int(i) for i in np.flatnonzero(waiting))
+    return Match(closed_teams, wait, match_reward(r, closed_teams, wait))

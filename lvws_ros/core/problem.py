@@ -1,0 +1,235 @@
+"""Problem model of heterogeneous collaborative scheduling (LVWS paper, section III-A).
+
+A team of N robots r_i = [a_i, c_i, w_i] (availability, capability vector, payload
+capacity) and M tasks t_j = [s_j, c_j, w_j] (status, required capabilities, payload
+need) with durations and a precedence DAG P. :func:`validate_instance` rejects bad
+input with an :class:`~lvws_ros.errors.InstanceError` that names the problem and the
+offending ids; reading and writing files is :mod:`lvws_ros.core.formats`.
+"""
+
+from __future__ import annotations
+
+import graphlib
+import math
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from lvws_ros.core.subteams import BoolArray, FloatArray, shortfall
+from lvws_ros.errors import InstanceError
+
+# A capability named "@<site>" is a location: robots there hold it, tasks there need it.
+# The matching enforces it like any capability; the network's node features leave it out.
+SITE_PREFIX = "@"
+
+
+@dataclass(frozen=True)
+class Robot:
+    id: str
+    capabilities: tuple[int, ...]
+    payload: float
+    extra: Mapping[str, Any] = field(default_factory=dict, compare=False)
+
+
+@dataclass(frozen=True)
+class Task:
+    id: str
+    capabilities: tuple[int, ...]
+    payload: float
+    duration: float
+    after: tuple[str, ...] = ()
+    extra: Mapping[str, Any] = field(default_factory=dict, compare=False)
+
+
+@dataclass(frozen=True)
+class Instance:
+    """A validated problem instance; array views are indexed like ``robots``/``tasks``."""
+
+    name: str
+    capabilities: tuple[str, ...]
+    robots: tuple[Robot, ...]
+    tasks: tuple[Task, ...]
+
+    def __post_init__(self) -> None:
+        validate_instance(self)
+
+    @property
+    def num_robots(self) -> int:
+        return len(self.robots)
+
+    @property
+    def num_tasks(self) -> int:
+        return len(self.tasks)
+
+    @cached_property
+    def robot_index(self) -> dict[str, int]:
+        return {r.id: i for i, r in enumerate(self.robots)}
+
+    @cached_property
+    def task_index(self) -> dict[str, int]:
+        return {t.id: j for j, t in enumerate(self.tasks)}
+
+    @cached_property
+    def robot_caps(self) -> BoolArray:
+        """c^r as an N x K boolean matrix."""
+        return _caps_matrix([r.capabilities for r in self.robots], len(self.capabilities))
+
+    @cached_property
+    def task_caps(self) -> BoolArray:
+        """c^t as an M x K boolean matrix."""
+        return _caps_matrix([t.capabilities for t in self.tasks], len(self.capabilities))
+
+    @cached_property
+    def skill_columns(self) -> tuple[int, ...]:
+        """Capability columns that are skills, not sites (see SITE_PREFIX)."""
+        return tuple(k for k, name in enumerate(self.capabilities) if not name.startswith(SITE_PREFIX))
+
+    @cached_property
+    def robot_payload(self) -> FloatArray:
+        return np.array([r.payload for r in self.robots], dtype=np.float64)
+
+    @cached_property
+    def task_payload(self) -> FloatArray:
+        return np.array([t.payload for t in self.tasks], dtype=np.float64)
+
+    @cached_property
+    def durations(self) -> FloatArray:
+        return np.array([t.duration for t in self.tasks], dtype=np.float64)
+
+    @cached_property
+    def prerequisites(self) -> tuple[tuple[int, ...], ...]:
+        """Indices of each task's prerequisites (the in-edges of P)."""
+        return tuple(tuple(self.task_index[p] for p in t.after) for t in self.tasks)
+
+    @cached_property
+    def successors(self) -> tuple[tuple[int, ...], ...]:
+        succ: list[list[int]] = [[] for _ in self.tasks]
+        for j, pre in enumerate(self.prerequisites):
+            for i in pre:
+                succ[i].append(j)
+        return tuple(tuple(s) for s in succ)
+
+    @cached_property
+    def precedence_matrix(self) -> BoolArray:
+        """P with P[i, j] = True when task i is a prerequisite of task j."""
+        p = np.zeros((self.num_tasks, self.num_tasks), dtype=bool)
+        for j, pre in enumerate(self.prerequisites):
+            p[list(pre), j] = True
+        return p
+
+    @cached_property
+    def critical_tail(self) -> FloatArray:
+        """Longest duration path from each task to the end of the DAG, its own duration included."""
+        tail = self.durations.copy()
+        for j in reversed(self.topological_order):
+            if self.successors[j]:
+                tail[j] += max(tail[s] for s in self.successors[j])
+        return tail
+
+    @cached_property
+    def descendant_count(self) -> npt.NDArray[np.int64]:
+        """How many tasks depend on each task, directly or not."""
+        reach = self.precedence_matrix.copy()
+        for j in reversed(self.topological_order):
+            for s in self.successors[j]:
+                reach[j] |= reach[s]
+        count: npt.NDArray[np.int64] = reach.sum(axis=1).astype(np.int64)
+        return count
+
+    @cached_property
+    def topological_order(self) -> tuple[int, ...]:
+        """A topological order of the task indices (set by validation, which computes it anyway)."""
+        return _topological_order(self)
+
+
+def _caps_matrix(rows: Sequence[Sequence[int]], k: int) -> BoolArray:
+    if not rows:
+        return np.zeros((0, k), dtype=bool)
+    return np.array(rows, dtype=np.int8).astype(bool).reshape(len(rows), k)
+
+
+def _topological_order(inst: Instance) -> tuple[int, ...]:
+    """A deterministic topological order of the task indices (graphlib); InstanceError
+    naming one cycle when the prerequisites have one."""
+    index = {t.id: j for j, t in enumerate(inst.tasks)}
+    graph = {j: [index[p] for p in t.after] for j, t in enumerate(inst.tasks)}
+    try:
+        return tuple(graphlib.TopologicalSorter(graph).static_order())
+    except graphlib.CycleError as exc:
+        cycle = [inst.tasks[j].id for j in exc.args[1]]  # each one a prerequisite of the next
+        raise InstanceError(f"cyclic prerequisites: {' -> '.join(cycle)}") from None
+
+
+def _check_number(value: Any, what: str, *, positive: bool) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InstanceError(f"{what} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise InstanceError(f"{what} must be finite, got {value!r}")
+    if positive and value <= 0:
+        raise InstanceError(f"{what} must be > 0, got {value!r}")
+    if not positive and value < 0:
+        raise InstanceError(f"{what} must be >= 0, got {value!r}")
+
+
+def _check_vector(vec: Sequence[Any], k: int, what: str) -> None:
+    if len(vec) != k:
+        raise InstanceError(f"{what} has {len(vec)} entries, expected {k} (one per capability)")
+    if any(isinstance(v, bool) or v not in (0, 1) for v in vec):
+        raise InstanceError(f"{what} must hold only 0 or 1, got {list(vec)}")
+
+
+def validate_instance(inst: Instance) -> None:
+    """Raise InstanceError naming every kind of problem of section 'Problem instance'."""
+    k = len(inst.capabilities)
+    if k < 1:
+        raise InstanceError("capabilities: at least one capability name is needed")
+    if len(set(inst.capabilities)) != k:
+        raise InstanceError(f"capabilities: duplicate names in {list(inst.capabilities)}")
+    if not inst.robots:
+        raise InstanceError("robots: the team is empty")
+    _no_duplicates([r.id for r in inst.robots], "robot")
+    _no_duplicates([t.id for t in inst.tasks], "task")
+    for r in inst.robots:
+        _check_vector(r.capabilities, k, f"robot {r.id!r} capabilities")
+        _check_number(r.payload, f"robot {r.id!r} payload", positive=True)
+    task_ids = {t.id for t in inst.tasks}
+    for t in inst.tasks:
+        _check_vector(t.capabilities, k, f"task {t.id!r} capabilities")
+        if not any(t.capabilities):
+            raise InstanceError(f"task {t.id!r} capabilities: needs at least one capability")
+        _check_number(t.payload, f"task {t.id!r} payload", positive=False)
+        _check_number(t.duration, f"task {t.id!r} duration", positive=True)
+        unknown = [p for p in t.after if p not in task_ids]
+        if unknown:
+            raise InstanceError(f"task {t.id!r} after: unknown task id(s) {unknown}")
+        if t.id in t.after:
+            raise InstanceError(f"task {t.id!r} after: a task cannot be its own prerequisite")
+        if len(set(t.after)) != len(t.after):
+            raise InstanceError(f"task {t.id!r} after: duplicate prerequisite ids")
+    inst.__dict__["topological_order"] = _topological_order(inst)  # prime the cached_property
+    team_caps = inst.robot_caps.any(axis=0)
+    team_payload = float(inst.robot_payload.sum())
+    for j, t in enumerate(inst.tasks):
+        missing, short = shortfall(team_caps, team_payload, inst.task_caps[j], t.payload)
+        if missing.any():
+            names = [inst.capabilities[c] for c in np.flatnonzero(missing)]
+            raise InstanceError(f"task {t.id!r} can never be covered: no robot has capability {names}")
+        if short > 0:
+            raise InstanceError(
+                f"task {t.id!r} can never be covered: needs payload {t.payload}, "
+                f"the whole team carries {team_payload}"
+            )
+
+
+def _no_duplicates(ids: Sequence[str], kind: str) -> None:
+    for i in ids:
+        if not isinstance(i, str) or not i:
+            raise InstanceError(f"{kind} ids must be non-empty strings, got {i!r}")
+    dups = sorted(i for i, count in Counter(ids).items() if count > 1)
+    if dups:
+        raise InstanceError(f"duplicate {kind} id(s): {dups}")

@@ -1,0 +1,123 @@
+"""Schedules and the six validity rules of ``lvws-schedule/1`` (formats.md).
+
+Reading and writing schedule files is :mod:`lvws_ros.core.formats`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from itertools import pairwise
+from typing import Any
+
+import numpy as np
+
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.subteams import TOLERANCE, shortfall
+
+
+@dataclass(frozen=True)
+class Assignment:
+    task: str
+    robots: tuple[str, ...]
+    start: float
+    end: float
+
+
+@dataclass
+class Schedule:
+    instance: str
+    policy: str
+    assignments: list[Assignment]
+    makespan: float
+    decisions: int = 0
+    compute_seconds: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_assignments(
+        cls,
+        instance: str,
+        policy: str,
+        assignments: Sequence[Assignment],
+        decisions: int = 0,
+        compute_seconds: float = 0.0,
+    ) -> Schedule:
+        ordered = sorted(assignments, key=lambda a: (a.start, a.task))
+        makespan = max((a.end for a in ordered), default=0.0)
+        return cls(instance, policy, ordered, makespan, decisions, compute_seconds)
+
+    def by_task(self) -> dict[str, Assignment]:
+        return {a.task: a for a in self.assignments}
+
+
+@dataclass(frozen=True)
+class Violation:
+    rule: int
+    message: str
+
+    def __str__(self) -> str:
+        return f"rule {self.rule}: {self.message}"
+
+
+def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[Violation]:
+    """Every violation of the six validity rules of formats.md (empty list: valid)."""
+    v: list[Violation] = []
+    # Rule 1: each task exactly once, robots exist.
+    counts: dict[str, int] = {}
+    for a in s.assignments:
+        counts[a.task] = counts.get(a.task, 0) + 1
+    for t in inst.tasks:
+        if counts.get(t.id, 0) == 0:
+            v.append(Violation(1, f"task {t.id!r} is not assigned"))
+        elif counts[t.id] > 1:
+            v.append(Violation(1, f"task {t.id!r} appears in {counts[t.id]} assignments"))
+    for task_id in sorted(set(counts) - set(inst.task_index)):
+        v.append(Violation(1, f"unknown task id {task_id!r}"))
+    for a in s.assignments:
+        unknown = [r for r in a.robots if r not in inst.robot_index]
+        if unknown:
+            v.append(Violation(1, f"task {a.task!r}: unknown robot id(s) {unknown}"))
+        if not a.robots:
+            v.append(Violation(2, f"task {a.task!r}: empty subteam"))
+        if len(set(a.robots)) != len(a.robots):
+            v.append(Violation(1, f"task {a.task!r}: a robot is listed twice"))
+    by_task = {a.task: a for a in s.assignments if a.task in inst.task_index}
+    for a in by_task.values():
+        t = inst.tasks[inst.task_index[a.task]]
+        members = [inst.robot_index[r] for r in a.robots if r in inst.robot_index]
+        # Rule 2: capability OR covers the task, payloads add up (Eqs. 10-11).
+        caps = inst.robot_caps[members].any(axis=0)
+        carried = float(inst.robot_payload[members].sum())
+        missing, short = shortfall(caps, carried, inst.task_caps[inst.task_index[a.task]], t.payload)
+        if missing.any():
+            names = [inst.capabilities[c] for c in np.flatnonzero(missing)]
+            v.append(Violation(2, f"task {t.id!r}: subteam {list(a.robots)} lacks capability {names}"))
+        if short > 0:
+            v.append(Violation(2, f"task {t.id!r}: subteam payload {carried:g} < needed {t.payload:g}"))
+        # Rule 3: duration and start.
+        if abs((a.end - a.start) - t.duration) > tol:
+            v.append(Violation(3, f"task {t.id!r}: end - start = {a.end - a.start:g}, duration is {t.duration:g}"))
+        if a.start < -tol:
+            v.append(Violation(3, f"task {t.id!r}: starts at {a.start:g} < 0"))
+        # Rule 4: prerequisites finished.
+        for p in t.after:
+            pa = by_task.get(p)
+            if pa is not None and a.start < pa.end - tol:
+                v.append(Violation(4, f"task {t.id!r} starts at {a.start:g} before prerequisite {p!r} ends at {pa.end:g}"))
+    # Rule 5: no robot in two overlapping assignments.
+    per_robot: dict[str, list[Assignment]] = {}
+    for a in s.assignments:
+        for r in set(a.robots):
+            per_robot.setdefault(r, []).append(a)
+    for r, items in sorted(per_robot.items()):
+        items.sort(key=lambda a: (a.start, a.end))
+        for x, y in pairwise(items):
+            if y.start < x.end - tol:
+                v.append(Violation(5, f"robot {r!r} is in {x.task!r} [{x.start:g}, {x.end:g}) "
+                                      f"and {y.task!r} [{y.start:g}, {y.end:g}) at once"))
+    # Rule 6: makespan is the largest end.
+    latest = max((a.end for a in s.assignments), default=0.0)
+    if abs(s.makespan - latest) > tol:
+        v.append(Violation(6, f"makespan {s.makespan:g} != largest end {latest:g}"))
+    return v

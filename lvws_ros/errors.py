@@ -1,0 +1,63 @@
+"""The one error hierarchy of lvws_ros (as rosbags keeps one ``errors.py``).
+
+Every error a user can cause (a malformed file, an unknown policy name, a bag that is
+not a run, a child process that fails) is an :class:`LvwsError` whose message names the
+file and the item. The ``lvws`` command turns an ``LvwsError`` (and an ``OSError`` on a
+user's path) into exit code 2 with that message; anything else is a bug and shows as
+one, with its traceback.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "AssignmentRejected",
+    "BagError",
+    "ConfigError",
+    "ExpertError",
+    "InstanceError",
+    "LaunchError",
+    "LvwsError",
+    "ModelError",
+    "PolicyError",
+    "ScheduleError",
+]
+
+
+class LvwsError(Exception):
+    """Base of every error lvws_ros raises on purpose."""
+
+
+class InstanceError(LvwsError):
+    """An instance (file or object) that breaks the lvws-instance/1 rules."""
+
+
+class ScheduleError(LvwsError):
+    """A schedule file that is not lvws-schedule/1 (structure, not the validity rules)."""
+
+
+class PolicyError(LvwsError):
+    """A policy that is unknown, returned an assignment that breaks the rules, or made no progress."""
+
+
+class ExpertError(PolicyError):
+    """The exact expert cannot handle the instance or found nothing."""
+
+
+class ModelError(LvwsError):
+    """A model checkpoint that is missing, malformed or not of the expected format."""
+
+
+class ConfigError(LvwsError):
+    """A malformed configuration: the simulator's cell YAML, a parameter file."""
+
+
+class AssignmentRejected(LvwsError):
+    """The simulated world cannot execute an assignment (the message says why)."""
+
+
+class BagError(LvwsError):
+    """A bag that cannot be read as a run (missing, truncated, wrong topics)."""
+
+
+class LaunchError(LvwsError):
+    """A launched child process failed or the run did not finish."""

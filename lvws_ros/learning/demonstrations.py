@@ -1,0 +1,177 @@
+"""Expert demonstrations for imitation learning (LVWS paper, section III-C).
+
+A demonstration is one decision step: the graph features of the state, the expert
+reward matrix E (N x (M+1), last column the idle task) and the feasibility mask X.
+
+Expert rewards. Let k = 1, 2, ... count the decision steps after the current one in
+the expert's schedule from this state (a decision step is every distinct task end).
+The immediate expert reward e_k is 1 for each task finished at step k, so the
+accumulated discounted reward of an assignment, S = sum_k gamma^k e_k, is gamma^{k_j}
+for the task j it finishes:
+
+* robot i that the expert assigns to task j now:   E_ij      = gamma^{k_j};
+* free robot i that the expert makes wait:         E_i,idle  = gamma^{k_i}, k_i the step
+  at which the robot's next task ends (the end of the schedule if it has none);
+* every other entry:                                0.
+
+gamma = GAMMA (0.9). Earlier-finishing expert assignments thus get larger rewards, and
+the greedy matching takes them first. X_ij = 1 for a free robot and a ready task the
+robot can help (a needed capability, or payload), and for a free robot's idle column.
+
+States come from the expert's own run (:func:`expert_demos`) or, for DAgger, from any
+policy's run, labelled by the expert solving from each visited state
+(:func:`dagger_demos`). :func:`label_instances` runs either over many instances in
+parallel processes, or on a Ray cluster when given its address.
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lvws_ros.core.executor import Policy, State, simulate
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.schedule import Schedule
+from lvws_ros.core.subteams import TOLERANCE
+from lvws_ros.learning.features import encode_state
+from lvws_ros.learning.loss import Demo, feasibility_mask
+from lvws_ros.policies.exact import ExactPolicy, solve_exact
+
+GAMMA = 0.9
+
+
+def label_state(state: State, schedule: Schedule, gamma: float = GAMMA) -> tuple[np.ndarray, np.ndarray]:
+    """E and X of one state, from an expert schedule that continues from it."""
+    inst = state.instance
+    n, m = inst.num_robots, inst.num_tasks
+    t = state.time
+    ends = sorted({round(a.end, 9) for a in schedule.assignments if a.end > t + TOLERANCE})
+
+    def steps_until(time: float) -> int:
+        return 1 + int(np.searchsorted(ends, round(time, 9) - 1e-9))
+
+    e = np.zeros((n, m + 1), dtype=np.float32)
+    free = state.robot_available()
+    assigned: set[int] = set()
+    next_end = np.full(n, np.inf)
+    for a in schedule.assignments:
+        j = inst.task_index[a.task]
+        robots = [inst.robot_index[r] for r in a.robots]
+        if abs(a.start - t) <= TOLERANCE and np.isnan(state.task_start[j]):
+            for r in robots:
+                e[r, j] = gamma ** steps_until(a.end)
+                assigned.add(r)
+        elif a.start > t + TOLERANCE:
+            for r in robots:
+                next_end[r] = min(next_end[r], a.end)
+    makespan = max(ends) if ends else t
+    for w in np.flatnonzero(free):
+        if w not in assigned:
+            e[w, m] = gamma ** steps_until(next_end[w] if np.isfinite(next_end[w]) else makespan)
+    ready = np.zeros(m, dtype=bool)
+    ready[state.ready_tasks()] = True
+    x = feasibility_mask(inst.robot_caps, inst.task_caps, inst.robot_payload, inst.task_payload)
+    x[:, :m] &= ready[None, :]
+    x &= free[:, None]
+    return e, x
+
+
+def expert_demos(inst: Instance, time_limit: float = 30.0, workers: int = 2) -> list[Demo]:
+    """Demonstrations along the expert's own schedule."""
+    policy = ExactPolicy(time_limit=time_limit, workers=workers)
+    run = simulate(inst, policy, record_states=True)
+    out = []
+    for step in run.steps:
+        assert step.state is not None
+        e, x = label_state(step.state, run.schedule)
+        out.append(Demo(encode_state(step.state), e, x))
+    return out
+
+
+def dagger_demos(inst: Instance, policy: Policy, time_limit: float = 30.0, workers: int = 2,
+                 max_states: int | None = None) -> list[Demo]:
+    """States visited by ``policy``, each labelled by the expert solving from that state."""
+    run = simulate(inst, policy, record_states=True)
+    states = [s.state for s in run.steps if s.state is not None]
+    if max_states is not None and len(states) > max_states:
+        keep = np.linspace(0, len(states) - 1, max_states).round().astype(int)
+        states = [states[k] for k in keep]
+    out = []
+    for state in states:
+        res = solve_exact(inst, state=state, time_limit=time_limit, workers=workers)
+        assert res.schedule is not None
+        e, x = label_state(state, res.schedule)
+        out.append(Demo(encode_state(state), e, x))
+    return out
+
+
+def _expert_job(args: tuple[Instance, float, int]) -> list[Demo]:
+    return expert_demos(*args)
+
+
+def label_instances(
+    instances: Sequence[Instance],
+    *,
+    processes: int = 2,
+    time_limit: float = 30.0,
+    workers: int = 1,
+    ray_address: str | None = None,
+    jobs: Sequence[Any] | None = None,
+    job: Callable[[Any], list[Demo]] = _expert_job,
+    progress: bool = True,
+) -> list[Demo]:
+    """Label many instances in parallel: local processes, or Ray tasks when
+    ``ray_address`` is given ("local" starts a local Ray instance). By default each job
+    is the expert's own run on one instance; ``jobs``/``job`` run other labelling
+    (DAgger) the same way."""
+    from tqdm import tqdm
+
+    if jobs is None:
+        jobs = [(inst, time_limit, workers) for inst in instances]
+    results: list[list[Demo]] = []
+    if ray_address is not None:
+        import ray
+
+        ray.init(address=None if ray_address == "local" else ray_address,
+                 num_cpus=processes if ray_address == "local" else None,
+                 include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
+        try:
+            remote = ray.remote(job)
+            pending = [remote.remote(j) for j in jobs]
+            with tqdm(total=len(pending), desc="labelling (ray)", disable=not progress, unit="inst") as bar:
+                order = {ref: k for k, ref in enumerate(pending)}
+                done: dict[int, list[Demo]] = {}
+                while pending:
+                    ready, pending = ray.wait(pending, num_returns=1)
+                    done[order[ready[0]]] = ray.get(ready[0])
+                    bar.update(1)
+            results = [done[k] for k in range(len(jobs))]
+        finally:
+            ray.shutdown()
+    elif processes <= 1:
+        results = [job(j) for j in tqdm(jobs, desc="labelling", disable=not progress, unit="inst")]
+    else:
+        with ProcessPoolExecutor(max_workers=processes) as pool:
+            results = list(tqdm(pool.map(job, jobs, chunksize=4), total=len(jobs), desc="labelling",
+                                disable=not progress, unit="inst"))
+    return [d for demos in results for d in demos]
+
+
+def save_demos(demos: Sequence[Demo], path: str | Path, meta: dict[str, Any] | None = None) -> None:
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    with p.open("wb") as f:
+        pickle.dump({"format": "lvws-demos/1", "meta": meta or {}, "demos": list(demos)}, f)
+
+
+def load_demos(path: str | Path) -> tuple[list[Demo], dict[str, Any]]:
+    with Path(path).open("rb") as f:
+        data = pickle.load(f)
+    if not isinstance(data, dict) or data.get("format") != "lvws-demos/1":
+        raise ValueError(f"{path}: not an lvws-demos/1 file")
+    return data["demos"], data["meta"]

@@ -1,0 +1,246 @@
+"""Imitation learning of the GATN with the loss of Eq. 12 and Adam; DAgger on top.
+
+Pipeline (``lvws train``): the training splits of the chosen datasets; the last
+VALIDATION_SHARE of them are held out for model selection (never the test splits);
+expert demonstrations on the rest; training; then DAgger rounds: roll the current
+policy out on training instances, label the states it reaches with the expert solving
+from each of them, add them to the data and train on.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from lvws_ros.core.datasets import DATASETS, dataset_instance
+from lvws_ros.core.executor import Policy, simulate
+from lvws_ros.core.problem import Instance
+from lvws_ros.learning.checkpoint import read_checkpoint, save_checkpoint
+from lvws_ros.learning.demonstrations import Demo, dagger_demos, label_instances, load_demos, save_demos
+from lvws_ros.learning.gatn import GATN, GATNConfig
+from lvws_ros.learning.loss import batch_tensors, imitation_loss
+from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, DBGMPolicy, LVWSPolicy
+
+VALIDATION_SHARE = 0.1
+
+
+@dataclass
+class TrainConfig:
+    epochs: int = 20
+    batch_size: int = 64
+    lr: float = 1e-3
+    lam: float = 0.1  # lambda of Eq. 12
+    choice_weight: float = 1.0  # per-robot choice term (beyond the paper); 0: Eq. 12 alone
+    seed: int = 0
+    dbgm: bool = False  # GAT only, no idle column in the loss
+    model: GATNConfig = field(default_factory=GATNConfig)
+
+
+def evaluate_loss(model: GATN, demos: Sequence[Demo], cfg: TrainConfig) -> float:
+    model.eval()
+    total, count = 0.0, 0
+    with torch.inference_mode():
+        for k in range(0, len(demos), 256):
+            chunk = demos[k:k + 256]
+            batch, e, x, valid = batch_tensors(chunk, use_idle=not cfg.dbgm)
+            total += imitation_loss(model(batch), e, x, valid, cfg.lam, cfg.choice_weight).item() * len(chunk)
+            count += len(chunk)
+    return total / max(count, 1)
+
+
+def _with_config(meta: dict[str, Any], cfg: TrainConfig, model: GATN) -> dict[str, Any]:
+    """Checkpoint meta with the training config that produced the weights."""
+    return {**meta, "train_config": {**asdict(cfg), "model": model.cfg.to_dict()}}
+
+
+def train(
+    demos: Sequence[Demo],
+    cfg: TrainConfig,
+    *,
+    model: GATN | None = None,
+    validate: Callable[[GATN], float] | None = None,
+    checkpoint: str | Path | None = None,
+    resume: str | Path | None = None,
+    meta: dict[str, Any] | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> tuple[GATN, list[dict[str, float]]]:
+    """Train on ``demos``; keep the weights with the best ``validate`` score (lower is
+    better, e.g. mean makespan on held-out training instances) or the last ones."""
+    from tqdm import tqdm
+
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    if model is None:
+        model = GATN(cfg.model)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    start_epoch = 0
+    if resume is not None:
+        data = read_checkpoint(resume)
+        model.load_state_dict(data["state_dict"])
+        if "optimizer" in data:
+            opt.load_state_dict(data["optimizer"])
+        start_epoch = int(data.get("epoch", 0))
+        log(f"resumed from {resume} at epoch {start_epoch}")
+    # Batches of similar sizes pad less: sort by graph size, shuffle the batches.
+    order = sorted(range(len(demos)), key=lambda k: (demos[k].expert.shape, k))
+    batches = [order[k:k + cfg.batch_size] for k in range(0, len(order), cfg.batch_size)]
+    history: list[dict[str, float]] = []
+    best_score, best_state = math.inf, None
+    for epoch in range(start_epoch, cfg.epochs):
+        model.train()
+        t0 = time.perf_counter()
+        losses = []
+        for idx in tqdm(rng.permutation(len(batches)), desc=f"epoch {epoch + 1}/{cfg.epochs}",
+                        disable=not progress, unit="batch", leave=False):
+            batch, e, x, valid = batch_tensors([demos[k] for k in batches[idx]], use_idle=not cfg.dbgm)
+            opt.zero_grad()
+            loss = imitation_loss(model(batch), e, x, valid, cfg.lam, cfg.choice_weight)
+            loss.backward()
+            opt.step()
+            losses.append(loss.item())
+        row = {"epoch": epoch + 1, "loss": statistics.fmean(losses), "seconds": time.perf_counter() - t0}
+        if validate is not None:
+            model.eval()
+            row["validation"] = validate(model)
+            if row["validation"] < best_score:
+                best_score = row["validation"]
+                best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        history.append(row)
+        log("  ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()))
+        if checkpoint is not None:
+            save_checkpoint(checkpoint, model, _with_config({**(meta or {}), "history": history}, cfg, model), opt,
+                            epoch + 1)
+    if best_state is not None:
+        model.load_state_dict(best_state)
+    model.eval()
+    return model, history
+
+
+# ------------------------------------------------------------------ the whole pipeline
+
+IDLE_BIASES = (0.0, -0.05, -0.1, -0.2, NO_VOLUNTARY_WAIT)
+
+
+@dataclass
+class PipelineConfig:
+    datasets: tuple[str, ...] = ("I", "II")
+    data_seed: int = 0
+    count: int | None = None  # training instances per dataset (None: the whole split)
+    validation_per_dataset: int = 100
+    dagger_rounds: int = 2
+    dagger_instances: int = 1500
+    dagger_epochs: int = 6
+    dagger_states: int = 8  # labelled states per rollout, spread over the run
+    label_time_limit: float = 5.0
+    processes: int = 2
+    ray_address: str | None = None
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+
+def split_training_instances(cfg: PipelineConfig) -> tuple[list[Instance], list[Instance]]:
+    """(training, validation) from the training splits only; validation is the last
+    ``validation_per_dataset`` training instances of each dataset."""
+    train_set: list[Instance] = []
+    val_set: list[Instance] = []
+    for key in cfg.datasets:
+        spec = DATASETS[key]
+        n = spec.train if cfg.count is None else min(cfg.count, spec.train)
+        insts = [dataset_instance(spec, k, cfg.data_seed) for k in range(n)]
+        cut = max(1, min(cfg.validation_per_dataset, n // 5))
+        train_set += insts[:-cut]
+        val_set += insts[-cut:]
+    return train_set, val_set
+
+
+def _policy(model: GATN, dbgm: bool, idle_bias: float) -> Policy:
+    return DBGMPolicy(model=model) if dbgm else LVWSPolicy(model=model, idle_bias=idle_bias)
+
+
+def _dagger_job(args: tuple[Instance, dict[str, Any], dict[str, Any], bool, float, float, int]) -> list[Demo]:
+    inst, state_dict, model_cfg, dbgm, idle_bias, time_limit, max_states = args
+    torch.set_num_threads(1)  # one process per core
+    model = GATN(GATNConfig(**model_cfg))
+    model.load_state_dict(state_dict)
+    return dagger_demos(inst, _policy(model.eval(), dbgm, idle_bias), time_limit=time_limit, workers=1,
+                        max_states=max_states)
+
+
+def calibrate(model: GATN, val: Sequence[Instance], optimal: dict[str, float], dbgm: bool,
+              log: Callable[[str], None]) -> tuple[float, float]:
+    """(idle bias, mean validation suboptimality %) with the best bias of IDLE_BIASES."""
+    best = (0.0, math.inf)
+    for bias in (IDLE_BIASES if not dbgm else (0.0,)):
+        score = statistics.fmean(
+            100 * (simulate(inst, _policy(model, dbgm, bias)).schedule.makespan - optimal[inst.name]) / optimal[inst.name]
+            for inst in val)
+        log(f"  validation: idle bias {bias:g} -> suboptimality {score:.2f} %")
+        if score < best[1]:
+            best = (bias, score)
+    return best
+
+
+def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path | None = None,
+                 resume: str | Path | None = None, progress: bool = True,
+                 log: Callable[[str], None] = print) -> tuple[GATN, dict[str, Any]]:
+    """Label, train, calibrate, DAgger; write the final checkpoint (no optimizer state) to ``out``."""
+    from lvws_ros.policies.exact import solve_exact
+
+    tcfg = cfg.train
+    torch.manual_seed(tcfg.seed)
+    train_set, val_set = split_training_instances(cfg)
+    log(f"{len(train_set)} training and {len(val_set)} validation instances from the training splits of "
+        f"datasets {cfg.datasets} (data seed {cfg.data_seed}, training seed {tcfg.seed})")
+    cache = Path(cache_dir) / f"demos-{'-'.join(cfg.datasets)}-s{cfg.data_seed}-n{len(train_set)}.pkl" if cache_dir else None
+    if cache is not None and cache.is_file():
+        demos, _ = load_demos(cache)
+        log(f"expert demonstrations from {cache}: {len(demos)} states")
+    else:
+        t0 = time.perf_counter()
+        demos = label_instances(train_set, processes=cfg.processes, time_limit=cfg.label_time_limit,
+                                ray_address=cfg.ray_address, progress=progress)
+        log(f"expert demonstrations: {len(demos)} states in {time.perf_counter() - t0:.0f} s")
+        if cache is not None:
+            save_demos(demos, cache, {"datasets": cfg.datasets, "data_seed": cfg.data_seed})
+    optimal = {inst.name: float(solve_exact(inst, workers=2, time_limit=60).makespan or 0.0) for inst in val_set}
+    stages: list[dict[str, Any]] = []
+    model, history = train(demos, tcfg, checkpoint=Path(out).with_suffix(".train.pt"), resume=resume,
+                           progress=progress, log=log)
+    bias, score = calibrate(model, val_set, optimal, tcfg.dbgm, log)
+    stages.append({"stage": "imitation", "states": len(demos), "history": history, "idle_bias": bias,
+                   "validation_suboptimality": score})
+    rng = np.random.default_rng(tcfg.seed)
+    for rnd in range(cfg.dagger_rounds):
+        picks = rng.choice(len(train_set), size=min(cfg.dagger_instances, len(train_set)), replace=False)
+        state_dict = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        jobs = [(train_set[k], state_dict, model.cfg.to_dict(), tcfg.dbgm, bias, cfg.label_time_limit,
+                 cfg.dagger_states) for k in picks]
+        t0 = time.perf_counter()
+        new = label_instances([], processes=cfg.processes, ray_address=cfg.ray_address, progress=progress,
+                              jobs=jobs, job=_dagger_job)
+        demos = [*demos, *new]
+        log(f"DAgger round {rnd + 1}: {len(new)} states labelled in {time.perf_counter() - t0:.0f} s, "
+            f"{len(demos)} in all")
+        round_cfg = TrainConfig(**{**asdict(tcfg), "model": tcfg.model, "epochs": cfg.dagger_epochs,
+                                   "lr": tcfg.lr / 2, "seed": tcfg.seed + rnd + 1})
+        candidate, history = train(demos, round_cfg, model=copy.deepcopy(model), progress=progress, log=log)
+        cand_bias, cand_score = calibrate(candidate, val_set, optimal, tcfg.dbgm, log)
+        stages.append({"stage": f"dagger-{rnd + 1}", "states": len(demos), "history": history,
+                       "idle_bias": cand_bias, "validation_suboptimality": cand_score})
+        if cand_score < score:  # keep a round only when it helps on validation
+            model, bias, score = candidate, cand_bias, cand_score
+    meta = {"kind": "dbgm" if tcfg.dbgm else "lvws", "idle_bias": bias, "validation_suboptimality": score,
+            "datasets": list(cfg.datasets), "data_seed": cfg.data_seed, "training_seed": tcfg.seed,
+            "pipeline": {k: v for k, v in asdict(cfg).items() if k != "train"}, "stages": stages}
+    save_checkpoint(out, model, _with_config(meta, tcfg, model))
+    log(f"model written to {out}: idle bias {bias:g}, validation suboptimality {score:.2f} %")
+    return model, meta

@@ -1,0 +1,406 @@
+"""Exact expert: minimum-makespan schedules with OR-Tools CP-SAT, with proofs.
+
+Model (per remaining task j, start S_j):
+  * exactly one inclusion-minimal covering subteam per task (Eqs. 10-11); since a task's
+    duration does not depend on its subteam, supersets are never needed for an optimum;
+  * per robot, an optional interval of length d_j at S_j present when the robot is in
+    the chosen subteam, and a no-overlap constraint over those intervals;
+  * precedence S_j >= S_i + d_i; makespan C >= S_j + d_j; minimise C;
+  * redundant cumulatives (robots in use, payload in use, holders of each capability in
+    use), start windows from longest paths before/after each task, and a hint from the
+    best heuristic schedule, which also bounds the horizon.
+
+It also solves from a mid-run :class:`~lvws_ros.core.executor.State`: tasks done or in
+progress stay as they are, busy robots are free only from their given time on, and
+nothing new starts before the state's time.
+
+An answer is called optimal only when CP-SAT proved it on exactly scaled durations;
+otherwise the status is ``feasible`` with the best bound and the gap.
+
+:func:`exact_match` solves one decision step's matching (Eqs. 7-11) exactly, for
+comparison with the greedy matching. This is the only module that imports OR-Tools.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from ortools.sat.python import cp_model
+
+from lvws_ros.core.executor import Decision, SimulationResult, State, TaskStatus, schedule_from_state, simulate
+from lvws_ros.core.matching import Match, check_shapes, match_reward
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.schedule import Assignment, Schedule
+from lvws_ros.core.subteams import MAX_ENUMERATED, TOLERANCE, BoolArray, FloatArray, minimal_subteams
+from lvws_ros.errors import ExpertError
+from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomSubteamPolicy
+
+SCALES = (1, 10, 100, 1000)
+
+
+@dataclass
+class ExpertResult:
+    schedule: Schedule | None
+    status: str  # optimal | feasible | unknown
+    makespan: float | None
+    bound: float
+    seconds: float
+    exact_scale: bool
+
+    @property
+    def proven(self) -> bool:
+        return self.status == "optimal"
+
+    @property
+    def gap(self) -> float:
+        """(makespan - bound) / makespan; 0 when proven optimal."""
+        if self.makespan is None or self.makespan <= 0:
+            return float("inf")
+        return max(0.0, (self.makespan - self.bound) / self.makespan)
+
+
+def _time_scale(values: np.ndarray) -> tuple[int, bool]:
+    for s in SCALES:
+        scaled = values * s
+        if np.all(np.abs(scaled - np.round(scaled)) < TOLERANCE):
+            return s, True
+    return SCALES[-1], False
+
+
+def heuristic_schedule(inst: Instance, state: State | None = None, seeds: int = 4) -> Schedule:
+    """Best of GRP and a few seeded RAND-w/-subteams runs (the expert's warm start)."""
+    runs: list[SimulationResult] = [simulate(inst, GreedyPayloadPolicy(), state=state)]
+    runs += [simulate(inst, RandomSubteamPolicy(seed=s), state=state) for s in range(seeds)]
+    return min(runs, key=lambda res: res.schedule.makespan).schedule
+
+
+def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> Schedule:
+    """Start every task as early as its prerequisites and robots allow, keeping each
+    robot's task order. The makespan never grows and every start falls on time 0 (or
+    the state's time) or on some task's end, i.e. on a decision step of the executor."""
+    t0 = state.time if state is not None else 0.0
+    robot_free = state.robot_free_at.copy() if state is not None else np.zeros(inst.num_robots)
+    end: dict[str, float] = {}
+    fixed: set[str] = set()
+    if state is not None:
+        for k in np.flatnonzero(state.task_status >= TaskStatus.ASSIGNED):
+            end[inst.tasks[k].id] = float(state.task_start[k] + inst.durations[k])
+            fixed.add(inst.tasks[k].id)
+    out = [a for a in sched.assignments if a.task in fixed]
+    for a in sorted((a for a in sched.assignments if a.task not in fixed), key=lambda a: (a.start, a.task)):
+        j = inst.task_index[a.task]
+        robots = [inst.robot_index[r] for r in a.robots]
+        start = max([t0, *(end[inst.tasks[p].id] for p in inst.prerequisites[j]), *(robot_free[r] for r in robots)])
+        stop = start + inst.durations[j]
+        end[a.task] = stop
+        robot_free[robots] = stop
+        out.append(Assignment(a.task, a.robots, float(start), float(stop)))
+    return Schedule.from_assignments(inst.name, sched.policy, out, sched.decisions, sched.compute_seconds)
+
+
+@dataclass
+class _Horizon:
+    """The remaining tasks of a state in integer ticks: durations, release times of the
+    robots, minimal subteams, start windows (heads and tails) and makespan bounds."""
+
+    todo: list[int]
+    fixed_end: dict[int, float]
+    scale: int
+    exact_scale: bool
+    dur: dict[int, int]
+    free_at: list[int]
+    teams: dict[int, list[tuple[int, ...]]]
+    head: dict[int, int]
+    tail: dict[int, int]
+    lower: int
+    upper: int
+
+    def ticks(self, x: float) -> int:
+        return round(x * self.scale)
+
+
+def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule) -> _Horizon:
+    status = state.task_status
+    fixed_end = {j: float(state.task_start[j] + inst.durations[j]) for j in range(inst.num_tasks)
+                 if status[j] in (TaskStatus.ASSIGNED, TaskStatus.DONE)}
+    t0 = state.time
+    times = np.concatenate([inst.durations, state.robot_free_at, [t0], np.array(list(fixed_end.values()))])
+    scale, exact_scale = _time_scale(times)
+
+    def ticks(x: float) -> int:
+        return round(x * scale)
+
+    dur = {j: max(1, ticks(inst.durations[j])) for j in todo}
+    free_at = [max(ticks(b), ticks(t0)) for b in state.robot_free_at]
+    teams = {j: minimal_subteams(inst.robot_caps, inst.robot_payload, inst.task_caps[j], inst.tasks[j].payload)
+             for j in todo}
+    for j in todo:
+        if not teams[j]:
+            raise ExpertError(f"task {inst.tasks[j].id!r} has no covering subteam")
+    # Start windows: heads (earliest start) in topological order, tails backwards.
+    head: dict[int, int] = {}
+    for j in inst.topological_order:
+        if j in dur:
+            lb = ticks(t0)
+            for p in inst.prerequisites[j]:
+                lb = max(lb, head[p] + dur[p] if p in dur else ticks(fixed_end[p]))
+            head[j] = max(lb, min(max(free_at[r] for r in team) for team in teams[j]))
+    tail: dict[int, int] = {}
+    for j in reversed(inst.topological_order):
+        if j in dur:
+            tail[j] = dur[j] + max((tail[s] for s in inst.successors[j] if s in dur), default=0)
+    lower = max([ticks(t0), *(head[j] + tail[j] for j in todo), *(ticks(e) for e in fixed_end.values())])
+    upper = max(ticks(hint.makespan), lower)
+    return _Horizon(todo, fixed_end, scale, exact_scale, dur, free_at, teams, head, tail, lower, upper)
+
+
+@dataclass
+class _Model:
+    model: cp_model.CpModel
+    start: dict[int, cp_model.IntVar]
+    choice: dict[int, list[cp_model.IntVar]]
+    makespan: cp_model.IntVar
+
+
+def _build_model(inst: Instance, h: _Horizon) -> _Model:
+    """Start variables, one exactly-one choice of minimal subteam per task, per-robot
+    no-overlap, precedence, makespan, and the redundant cumulatives."""
+    model = cp_model.CpModel()
+    todo, dur, teams = h.todo, h.dur, h.teams
+    start = {j: model.new_int_var(h.head[j], h.upper - h.tail[j], f"S_{j}") for j in todo}
+    makespan = model.new_int_var(h.lower, h.upper, "C")
+    task_iv = {j: model.new_fixed_size_interval_var(start[j], dur[j], f"I_{j}") for j in todo}
+    choice = {j: [model.new_bool_var(f"x_{j}_{k}") for k in range(len(teams[j]))] for j in todo}
+    per_robot: list[list[cp_model.IntervalVar]] = [[] for _ in inst.robots]
+    robot_count: dict[int, cp_model.IntVar] = {}
+    payload_use: dict[int, cp_model.IntVar] = {}
+    cap_use: list[dict[int, cp_model.IntVar]] = [{} for _ in inst.capabilities]
+    pay_int = np.round(inst.robot_payload * 1000).astype(np.int64)
+    for j in todo:
+        model.add_exactly_one(choice[j])
+        for r in sorted({r for team in teams[j] for r in team}):
+            y = model.new_bool_var(f"y_{r}_{j}")
+            model.add(y == sum(choice[j][k] for k, team in enumerate(teams[j]) if r in team))
+            per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
+            if h.free_at[r] > h.head[j]:
+                model.add(start[j] >= h.free_at[r]).only_enforce_if(y)
+        # Cumulative demands must be single variables in CP-SAT.
+        robot_count[j] = _demand(model, [len(team) for team in teams[j]], choice[j], f"n_{j}")
+        payload_use[j] = _demand(model, [int(pay_int[list(team)].sum()) for team in teams[j]], choice[j], f"w_{j}")
+        for c in range(len(inst.capabilities)):
+            holders = [int(inst.robot_caps[list(team), c].sum()) for team in teams[j]]
+            if any(holders):
+                cap_use[c][j] = _demand(model, holders, choice[j], f"c{c}_{j}")
+        for p in inst.prerequisites[j]:
+            if p in dur:
+                model.add(start[j] >= start[p] + dur[p])
+        model.add(makespan >= start[j] + dur[j])
+    for intervals in per_robot:
+        if len(intervals) > 1:
+            model.add_no_overlap(intervals)
+    ivs = [task_iv[j] for j in todo]
+    model.add_cumulative(ivs, [robot_count[j] for j in todo], inst.num_robots)
+    model.add_cumulative(ivs, [payload_use[j] for j in todo], int(pay_int.sum()))
+    for c, demand_by_task in enumerate(cap_use):
+        if demand_by_task:
+            model.add_cumulative([task_iv[j] for j in demand_by_task], list(demand_by_task.values()),
+                                 int(inst.robot_caps[:, c].sum()))
+    model.minimize(makespan)
+    return _Model(model, start, choice, makespan)
+
+
+def _add_hint(inst: Instance, h: _Horizon, m: _Model, hint: Schedule) -> None:
+    """Hint: the left-shifted heuristic schedule, each subteam cut down to a minimal one."""
+    by_task = hint.by_task()
+    for j in h.todo:
+        a = by_task.get(inst.tasks[j].id)
+        if a is None:
+            continue
+        m.model.add_hint(m.start[j], min(max(h.ticks(a.start), h.head[j]), h.upper - h.tail[j]))
+        robots = {inst.robot_index[r] for r in a.robots}
+        pick = next((k for k, team in enumerate(h.teams[j]) if set(team) <= robots), 0)
+        for k, x in enumerate(m.choice[j]):
+            m.model.add_hint(x, k == pick)
+    m.model.add_hint(m.makespan, h.upper)
+
+
+def _solution(inst: Instance, state: State, h: _Horizon, m: _Model, solver: cp_model.CpSolver) -> Schedule:
+    out = []
+    for j, t in enumerate(inst.tasks):
+        if j in h.fixed_end:
+            s0 = float(state.task_start[j])
+            out.append(Assignment(t.id, tuple(inst.robots[r].id for r in state.task_team[j]), s0, s0 + t.duration))
+            continue
+        k = next(k for k, x in enumerate(m.choice[j]) if solver.boolean_value(x))
+        s0 = solver.value(m.start[j]) / h.scale
+        out.append(Assignment(t.id, tuple(inst.robots[r].id for r in h.teams[j][k]), s0, s0 + t.duration))
+    return left_shift(inst, Schedule.from_assignments(inst.name, "exact", out), state)
+
+
+def solve_exact(
+    inst: Instance,
+    *,
+    state: State | None = None,
+    time_limit: float = 60.0,
+    workers: int = 8,
+    hint: Schedule | None = None,
+    seed: int = 0,
+) -> ExpertResult:
+    """Minimise the makespan of ``inst`` (from ``state`` when given) with CP-SAT."""
+    t_start = time.perf_counter()
+    if inst.num_robots > MAX_ENUMERATED:
+        raise ExpertError(f"the exact expert handles at most {MAX_ENUMERATED} robots, got {inst.num_robots}")
+    state = State.initial(inst) if state is None else state.copy()
+    state.refresh()
+    hint = left_shift(inst, heuristic_schedule(inst, state) if hint is None else hint, state)
+    todo = [j for j in range(inst.num_tasks) if state.task_status[j] in (TaskStatus.QUEUED, TaskStatus.READY)]
+    if not todo:
+        sched = schedule_from_state(state, "exact")
+        return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
+    h = _horizon(inst, state, todo, hint)
+    m = _build_model(inst, h)
+    _add_hint(inst, h, m, hint)
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
+    solver.parameters.num_workers = workers
+    solver.parameters.random_seed = seed
+    code = solver.solve(m.model)
+    seconds = time.perf_counter() - t_start
+    found = code in (cp_model.OPTIMAL, cp_model.FEASIBLE)
+    bound = float(solver.best_objective_bound) / h.scale if found else h.lower / h.scale
+    if code == cp_model.MODEL_INVALID:
+        raise ExpertError(f"invalid CP-SAT model: {m.model.validate()}")
+    if code == cp_model.INFEASIBLE:
+        raise ExpertError(f"CP-SAT proved the model infeasible for {inst.name!r}; the hint schedule contradicts it")
+    if not found:
+        return ExpertResult(hint, "unknown", hint.makespan, bound, seconds, h.exact_scale)
+    sched = _solution(inst, state, h, m, solver)
+    # With rounded durations (no exact scale) the real-time schedule is valid, not proven optimal.
+    status = "optimal" if code == cp_model.OPTIMAL and h.exact_scale else "feasible"
+    if status == "optimal":
+        bound = sched.makespan
+    sched.compute_seconds = seconds
+    return ExpertResult(sched, status, sched.makespan, min(bound, sched.makespan), seconds, h.exact_scale)
+
+
+def _demand(model: cp_model.CpModel, values: list[int], choice: Sequence[cp_model.IntVar], name: str) -> cp_model.IntVar:
+    """An integer variable equal to the value of the chosen alternative."""
+    var = model.new_int_var(min(values), max(values), name)
+    model.add(var == sum(v * x for v, x in zip(values, choice, strict=True)))
+    return var
+
+
+class ExactPolicy:
+    """Follows the expert's schedule: at each decision step, starts the tasks the
+    expert planned to start now, with the planned subteams (the ``exact`` policy)."""
+
+    name = "exact"
+
+    def __init__(self, time_limit: float = 60.0, workers: int = 8, seed: int = 0) -> None:
+        self.time_limit = time_limit
+        self.workers = workers
+        self.seed = seed
+        self.result: ExpertResult | None = None
+        self._plan: dict[int, Assignment] = {}
+
+    def reset(self, instance: Instance) -> None:
+        self.result = None
+        self._plan = {}
+
+    def _expected(self, t: float) -> bool:
+        """Whether ``t`` is a start or end time of the plan (always so in the executor)."""
+        return any(abs(a.start - t) <= TOLERANCE or abs(a.end - t) <= TOLERANCE for a in self._plan.values())
+
+    def decide(self, state: State) -> Decision:
+        inst = state.instance
+        if self.result is not None and not self._expected(state.time):
+            self.result = None  # the world deviated from the plan (online use): re-solve from here
+        if self.result is None:
+            self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed)
+            assert self.result.schedule is not None
+            self._plan = {inst.task_index[a.task]: a for a in self.result.schedule.assignments}
+        free = set(state.free_robots())
+        out = []
+        for j in state.ready_tasks():
+            a = self._plan.get(j)
+            if a is None or abs(a.start - state.time) > TOLERANCE:
+                continue
+            team = tuple(inst.robot_index[r] for r in a.robots)
+            if set(team) <= free:
+                out.append((j, team))
+                free -= set(team)
+        return Decision(tuple(out), tuple(sorted(free)))
+
+
+def exact_match(
+    r: FloatArray,
+    robot_caps: BoolArray,
+    robot_payload: FloatArray,
+    task_caps: BoolArray,
+    task_payload: FloatArray,
+    *,
+    time_limit: float = 10.0,
+    workers: int = 2,
+    necessary_only: bool = True,
+) -> Match:
+    """Optimal A* of Eqs. 7-11 with CP-SAT (rewards scaled to integers, 1e-6 resolution).
+
+    With ``necessary_only`` (the default, the same problem :func:`~lvws_ros.core.matching.greedy_match` solves)
+    every member of a subteam must be needed: without it the task would lack a capability
+    or payload. Without it, any robot may join a covered task when that pays more.
+    """
+    n, m = check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
+    model = cp_model.CpModel()
+    a = [[model.new_bool_var(f"a_{i}_{j}") for j in range(m + 1)] for i in range(n)]
+    z = [model.new_bool_var(f"z_{j}") for j in range(m)]
+    pay = np.round(robot_payload * 1000).astype(np.int64)
+    need = np.ceil(task_payload * 1000 - TOLERANCE).astype(np.int64)
+    for i in range(n):
+        model.add_exactly_one(a[i])  # Eq. 9, with the idle column as "no task"
+    for j in range(m):
+        for i in range(n):
+            model.add_implication(a[i][j], z[j])
+        for k in np.flatnonzero(task_caps[j]):  # Eq. 10
+            holders = [a[i][j] for i in range(n) if robot_caps[i, k]]
+            if holders:
+                model.add_bool_or(holders).only_enforce_if(z[j])
+            else:
+                model.add(z[j] == 0)
+        carried = sum(int(pay[i]) * a[i][j] for i in range(n))
+        model.add(carried >= int(need[j])).only_enforce_if(z[j])  # Eq. 11
+        if necessary_only:
+            for i in range(n):
+                reasons = []
+                short = model.new_bool_var(f"short_{i}_{j}")  # payload would fall short without i
+                model.add(carried - int(pay[i]) < int(need[j])).only_enforce_if(short)
+                reasons.append(short)
+                for k in np.flatnonzero(task_caps[j] & robot_caps[i]):
+                    sole = model.new_bool_var(f"sole_{i}_{j}_{k}")  # i is the only holder of k
+                    others = [a[q][j] for q in range(n) if q != i and robot_caps[q, k]]
+                    if others:
+                        model.add(sum(others) == 0).only_enforce_if(sole)
+                    reasons.append(sole)
+                model.add_bool_or(reasons).only_enforce_if(a[i][j])
+    scaled = np.round(r * 1e6).astype(np.int64)
+    model.maximize(sum(int(scaled[i, j]) * a[i][j] for i in range(n) for j in range(m + 1)))
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = time_limit
+    solver.parameters.num_workers = workers
+    status = solver.solve(model)
+    if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        raise ExpertError(f"exact_match: CP-SAT returned {solver.status_name(status)}")
+    teams: dict[int, tuple[int, ...]] = {}
+    waiting = []
+    for i in range(n):
+        for j in range(m + 1):
+            if solver.boolean_value(a[i][j]):
+                if j == m:
+                    waiting.append(i)
+                else:
+                    teams.setdefault(j, ())
+                    teams[j] = (*teams[j], i)
+    wait = tuple(waiting)
+    return Match(teams, wait, match_reward(r, teams, wait))

@@ -1,0 +1,42 @@
+"""Policies by name: the one place that knows every policy (above all of them).
+
+The CLI, the scheduler node's ``policy`` parameter and the result tables use these
+names. Heavy modules (OR-Tools, torch) are imported only when their policy is made.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from lvws_ros.core.executor import Policy
+from lvws_ros.errors import PolicyError
+
+__all__ = ["LEARNED_POLICIES", "POLICY_NAMES", "make_policy"]
+
+POLICY_NAMES = ("lvws", "lvws_rollout", "dbgm", "grp", "rand", "rand_subteam", "exact")
+LEARNED_POLICIES = ("lvws", "lvws_rollout", "dbgm")  # take a model_path
+
+
+def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
+    """A policy by its name. ``options``: ``time_limit``/``workers`` for ``exact``,
+    ``model_path`` for the learned ones (empty or None: the shipped checkpoint)."""
+    if name == "grp":
+        from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+        return GreedyPayloadPolicy()
+    if name in ("rand", "rand_subteam"):
+        from lvws_ros.policies.baselines import RandomPolicy, RandomSubteamPolicy
+
+        return RandomPolicy(seed) if name == "rand" else RandomSubteamPolicy(seed)
+    if name == "exact":
+        from lvws_ros.policies.exact import ExactPolicy
+
+        return ExactPolicy(seed=seed, **options)
+    if name in LEARNED_POLICIES:
+        from lvws_ros.learning.policies import DBGMPolicy, LVWSPolicy, LVWSRolloutPolicy
+
+        model_path = options.get("model_path") or None
+        kinds: dict[str, type[LVWSPolicy | DBGMPolicy | LVWSRolloutPolicy]] = {
+            "lvws": LVWSPolicy, "dbgm": DBGMPolicy, "lvws_rollout": LVWSRolloutPolicy}
+        return kinds[name](model_path=model_path)
+    raise PolicyError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")

@@ -1,0 +1,101 @@
+"""The one conversion between messages and the core's snapshots and decisions.
+
+``*_from_msg`` read any object with the message's fields, so they serve rclpy
+messages in the nodes and rosbags' deserialized messages in the bag reader alike.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from builtin_interfaces.msg import Duration, Time
+from lvws_msgs.msg import Assignment, AssignmentArray, RobotState, Task, TaskGraph, TeamState
+
+from lvws_ros.core.executor import TaskStatus
+from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskInfo, TeamSnapshot
+
+__all__ = ["decision_from_msg", "decision_to_msg", "from_time", "graph_from_msg", "graph_to_msg", "team_from_msg",
+           "team_to_msg", "to_duration", "to_time"]
+
+
+def to_time(seconds: float) -> Time:
+    if not math.isfinite(seconds) or seconds < 0:
+        seconds = 0.0
+    sec = int(seconds)
+    return Time(sec=sec, nanosec=min(round((seconds - sec) * 1e9), 999_999_999))
+
+
+def from_time(t: Any) -> float:
+    """Seconds of a builtin_interfaces Time or Duration."""
+    return float(t.sec) + float(t.nanosec) * 1e-9
+
+
+def to_duration(seconds: float) -> Duration:
+    sec = int(seconds)
+    return Duration(sec=sec, nanosec=min(round((seconds - sec) * 1e9), 999_999_999))
+
+
+def _stamped(msg: Any, snap: TeamSnapshot | GraphSnapshot, frame_id: str) -> Any:
+    msg.header.stamp = to_time(snap.stamp)
+    msg.header.frame_id = frame_id
+    msg.capability_names = list(snap.capability_names)
+    return msg
+
+
+def team_to_msg(snap: TeamSnapshot, frame_id: str = "map") -> TeamState:
+    msg = _stamped(TeamState(), snap, frame_id)
+    for r in snap.robots:
+        rs = RobotState(id=r.id, kind=r.kind, available=r.available, capabilities=list(r.capabilities),
+                        payload=float(r.payload), current_task=r.current_task, busy_for=float(r.busy_for))
+        rs.pose.x, rs.pose.y, rs.pose.theta = r.pose
+        msg.robots.append(rs)
+    return msg
+
+
+def team_from_msg(msg: Any) -> TeamSnapshot:
+    return TeamSnapshot(
+        from_time(msg.header.stamp), tuple(msg.capability_names),
+        tuple(RobotInfo(r.id, r.kind, bool(r.available), tuple(int(c) for c in r.capabilities), float(r.payload),
+                        r.current_task, float(r.busy_for), (float(r.pose.x), float(r.pose.y), float(r.pose.theta)))
+              for r in msg.robots))
+
+
+def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
+    msg = _stamped(TaskGraph(), snap, frame_id)
+    for t in snap.tasks:
+        msg.tasks.append(Task(id=t.id, status=int(t.status), capabilities=list(t.capabilities),
+                              payload=float(t.payload), duration=float(t.duration),
+                              prerequisites=list(t.prerequisites), assigned_robots=list(t.assigned_robots),
+                              start_time=to_time(t.start or 0.0), end_time=to_time(t.end or 0.0)))
+    return msg
+
+
+def graph_from_msg(msg: Any) -> GraphSnapshot:
+    tasks = []
+    for t in msg.tasks:
+        status = int(t.status)
+        start = from_time(t.start_time) if status >= TaskStatus.ASSIGNED else None
+        end = from_time(t.end_time) if status == TaskStatus.DONE else None
+        tasks.append(TaskInfo(t.id, status, tuple(int(c) for c in t.capabilities), float(t.payload),
+                              float(t.duration), tuple(t.prerequisites), tuple(t.assigned_robots), start, end))
+    return GraphSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names), tuple(tasks))
+
+
+def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:
+    msg = AssignmentArray()
+    msg.header.stamp = stamp
+    msg.decision_step = d.step
+    msg.policy = d.policy
+    msg.assignments = [Assignment(task_id=t, robot_ids=list(robots)) for t, robots in d.assignments]
+    msg.waiting_robot_ids = list(d.waiting)
+    msg.decision_latency = to_duration(d.latency)
+    msg.team_stamp = to_time(d.team_stamp)
+    msg.graph_stamp = to_time(d.graph_stamp)
+    return msg
+
+
+def decision_from_msg(msg: Any) -> OnlineDecision:
+    return OnlineDecision(int(msg.decision_step), tuple((a.task_id, tuple(a.robot_ids)) for a in msg.assignments),
+                          tuple(msg.waiting_robot_ids), from_time(msg.decision_latency), from_time(msg.team_stamp),
+                          from_time(msg.graph_stamp), msg.policy)

@@ -1,0 +1,194 @@
+"""``lvws launch``: simulator + scheduler + recorder as separate processes (launch_ros is
+not on pip, so this is plain Python).
+
+The three run on an isolated DDS domain (a random ROS_DOMAIN_ID, localhost discovery).
+The recorder starts first and the simulator waits for both other nodes, so the bag
+holds the whole run. When the simulator finishes, the scheduler and recorder get
+SIGINT (then SIGTERM, then SIGKILL if they hang); on Ctrl-C, SIGTERM or a crashed child
+every child is stopped the same way and the launcher exits non-zero with the reason.
+Children also get SIGTERM from the kernel if the launcher itself dies (PR_SET_PDEATHSIG),
+so no orphan outlives it.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from lvws_ros.errors import LaunchError
+
+PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except OSError:  # not Linux: the launcher's own handlers still stop the children
+        pass
+
+
+@dataclass
+class Child:
+    name: str
+    proc: subprocess.Popen[bytes]
+    log_path: Path
+    log: IO[bytes]
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+
+@dataclass
+class LaunchResult:
+    bag: Path
+    out_dir: Path
+    summary: dict[str, Any]
+    gif: Path | None = None
+    codes: dict[str, int | None] = field(default_factory=dict)
+
+
+def stop(children: Sequence[Child], grace: float = 10.0) -> dict[str, int | None]:
+    """SIGINT, then SIGTERM, then SIGKILL; returns each child's exit code."""
+    for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        live = [c for c in children if c.alive()]
+        if not live:
+            break
+        for c in live:
+            c.proc.send_signal(sig)
+        end = time.monotonic() + wait
+        while time.monotonic() < end and any(c.alive() for c in live):
+            time.sleep(0.05)
+    for c in children:
+        c.log.close()
+    return {c.name: c.proc.poll() for c in children}
+
+
+def _tail(path: Path, lines: int = 15) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+    except OSError:
+        return ""
+
+
+def _commands(bag: Path, *, policy: str, seed: int, model_path: str, rate: float, config: str,
+              params_file: str | None, summary: Path, gif: Path | None, sync: bool) -> dict[str, list[str]]:
+    """The three children's command lines, recorder first, simulator last."""
+    sched_params = ["-p", f"policy:={policy}", "-p", f"seed:={seed}", "-p", "use_sim_time:=true"]
+    if model_path:
+        sched_params += ["-p", f"model_path:={model_path}"]
+    if params_file:
+        sched_params = ["--params-file", params_file, *sched_params]
+    sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary}", "-p", "expect_subscribers:=2",
+                  "-p", f"sync:={'true' if sync else 'false'}"]
+    if gif is not None:
+        sim_params += ["-p", f"gif:={gif}"]
+    if config:
+        sim_params += ["-p", f"config:={config}"]
+    return {
+        "recorder": [sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag)],
+        "scheduler": [sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", *sched_params],
+        "cell_sim": [sys.executable, "-m", "lvws_ros.ros.cell_sim_node", "--ros-args", *sim_params],
+    }
+
+
+def _child_env(domain_id: int | None) -> dict[str, str]:
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(domain_id if domain_id is not None else random.SystemRandom().randint(1, 101))
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.setdefault("AMENT_PREFIX_PATH", sys.prefix)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _start(commands: dict[str, list[str]], env: dict[str, str], out: Path, children: list[Child],
+           interrupted: list[int]) -> None:
+    for cname, cmd in commands.items():
+        log_path = out / f"{cname}.log"
+        fh = open(log_path, "wb")
+        proc = subprocess.Popen(cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                preexec_fn=_die_with_parent)
+        children.append(Child(cname, proc, log_path, fh))
+        tmp = out / "pids.json.tmp"
+        tmp.write_text(json.dumps({c.name: c.proc.pid for c in children}))
+        tmp.replace(out / "pids.json")  # atomic: readers never see half a file
+        if cname == "recorder":
+            _wait_for_line(children[-1], "recording to", 60.0, interrupted)
+
+
+def _supervise(children: list[Child], timeout: float, t0: float, interrupted: list[int]) -> None:
+    """Until the simulator (the last child) exits; LaunchError when anything goes wrong."""
+    sim = children[-1]
+    while sim.alive():
+        if interrupted:
+            raise LaunchError(f"interrupted by signal {signal.Signals(interrupted[0]).name}")
+        for c in children[:-1]:
+            if not c.alive():
+                raise LaunchError(f"{c.name} exited early with code {c.proc.returncode}:\n{_tail(c.log_path)}")
+        if time.monotonic() - t0 > timeout:
+            raise LaunchError(f"the run did not finish within {timeout:g} s")
+        time.sleep(0.1)
+    if sim.proc.returncode != 0:
+        raise LaunchError(f"cell_sim exited with code {sim.proc.returncode}:\n{_tail(sim.log_path)}")
+
+
+def launch(*, policy: str = "lvws", seed: int = 0, model_path: str = "", rate: float = 20.0,
+           config: str = "", bag_dir: str | Path = "bags", out_dir: str | Path = "out", name: str | None = None,
+           params_file: str | None = None, gif: bool = True, timeout: float = 600.0,
+           domain_id: int | None = None, sync: bool = True, log: Any = print) -> LaunchResult:
+    """Run the case study end to end; raises LaunchError (children stopped) on failure."""
+    run = name or time.strftime(f"case-study-{policy}-%Y%m%d-%H%M%S")
+    bag = Path(bag_dir) / run
+    out = Path(out_dir) / run
+    if bag.exists():
+        raise LaunchError(f"{bag} already exists")
+    out.mkdir(parents=True, exist_ok=True)
+    summary_path = out / "summary.json"
+    gif_path = out / "run.gif"
+    commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
+                         params_file=params_file, summary=summary_path, gif=gif_path if gif else None, sync=sync)
+    children: list[Child] = []
+    interrupted: list[int] = []
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        interrupted.append(signum)
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    t0 = time.monotonic()
+    try:
+        _start(commands, _child_env(domain_id), out, children, interrupted)
+        _supervise(children, timeout, t0, interrupted)
+    except BaseException:
+        codes = stop(children)
+        log(f"children stopped: {codes}; logs in {out}")
+        raise
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    codes = stop(children)
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    summary.update({"wall_seconds_total": time.monotonic() - t0, "exit_codes": codes})
+    summary_path.write_text(json.dumps(summary, indent=1))
+    return LaunchResult(bag, out, summary, gif_path if gif_path.is_file() else None, codes)
+
+
+def _wait_for_line(child: Child, text: str, timeout: float, interrupted: list[int]) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if interrupted:
+            raise LaunchError(f"interrupted by signal {signal.Signals(interrupted[0]).name}")
+        if not child.alive():
+            raise LaunchError(f"{child.name} exited with code {child.proc.returncode}:\n{_tail(child.log_path)}")
+        if text in child.log_path.read_text(errors="replace"):
+            return
+        time.sleep(0.05)
+    raise LaunchError(f"{child.name} not ready after {timeout:g} s")

@@ -1,0 +1,167 @@
+"""The assembly-cell configuration (``config/assembly_cell.yaml``): cells, robots,
+objects and tasks of the paper's case study (section IV-B), read and checked.
+
+Every problem is a :class:`~lvws_ros.errors.ConfigError` naming the file and the item.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from lvws_ros.errors import ConfigError
+
+__all__ = ["ARM_KINDS", "MOBILE_KINDS", "CellConfig", "CellSpec", "ObjectSpec", "RobotSpec", "TaskSpec",
+           "load_cell_config"]
+
+ARM_KINDS = ("panda",)
+MOBILE_KINDS = ("jackal", "husky")
+
+
+@dataclass(frozen=True)
+class CellSpec:
+    id: str
+    position: tuple[float, float]
+    size: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    id: str
+    kind: str
+    payload: float
+    cell: str | None = None  # arms: their cell
+    start: tuple[float, float] = (0.0, 0.0)
+    speed: float = 0.0
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    id: str
+    weight: float
+    cell: str
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    id: str
+    type: str  # "transport" | "assembly"
+    object: str
+    cell: str  # assembly: where; transport: destination
+    source: str | None = None  # transport: origin
+    duration: float = 0.0  # assembly: work time
+    payload: float = 0.0  # assembly: the part the arm handles
+    after: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    name: str
+    frame_id: str
+    capabilities: tuple[str, ...]
+    dt: float
+    handling_time: float
+    arrive_tolerance: float
+    nominal_speed: float
+    cells: Mapping[str, CellSpec]
+    robots: tuple[RobotSpec, ...]
+    objects: Mapping[str, ObjectSpec]
+    tasks: tuple[TaskSpec, ...]
+
+
+def _num(value: Any, what: str, *, positive: bool = True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{what}: expected a finite number, got {value!r}")
+    if value < 0 or (positive and value == 0):
+        raise ConfigError(f"{what}: must be {'> 0' if positive else '>= 0'}, got {value!r}")
+    return float(value)
+
+
+def _xy(value: Any, what: str) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise ConfigError(f"{what}: expected [x, y], got {value!r}")
+    for v in value:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ConfigError(f"{what}: expected finite numbers, got {value!r}")
+    return (float(value[0]), float(value[1]))
+
+
+def load_cell_config(path: str | Path) -> CellConfig:
+    """Read and check an assembly-cell YAML file (the shipped case study:
+    :func:`lvws_ros.ros.resources.case_study_config`)."""
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such file") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: malformed YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{p}: expected a mapping at the top level")
+    try:
+        return _parse_config(data)
+    except KeyError as exc:
+        raise ConfigError(f"{p}: missing key {exc}") from None
+    except ConfigError as exc:
+        raise ConfigError(f"{p}: {exc}") from None
+
+
+def _robot(r: dict[str, Any], cells: Mapping[str, CellSpec]) -> RobotSpec:
+    kind = str(r["kind"])
+    if kind not in ARM_KINDS + MOBILE_KINDS:
+        raise ConfigError(f"robot {r['id']}: unknown kind {kind!r} (known: {ARM_KINDS + MOBILE_KINDS})")
+    payload = _num(r["payload"], f"robot {r['id']} payload")
+    if kind in ARM_KINDS:
+        if r.get("cell") not in cells:
+            raise ConfigError(f"robot {r['id']}: unknown cell {r.get('cell')!r}")
+        return RobotSpec(str(r["id"]), kind, payload, cell=str(r["cell"]), start=cells[r["cell"]].position)
+    return RobotSpec(str(r["id"]), kind, payload, start=_xy(r["start"], f"robot {r['id']} start"),
+                     speed=_num(r["speed"], f"robot {r['id']} speed"))
+
+
+def _task(t: dict[str, Any], cells: Mapping[str, CellSpec], objects: Mapping[str, ObjectSpec]) -> TaskSpec:
+    tid = str(t["id"])
+    if t.get("object") not in objects:
+        raise ConfigError(f"task {tid}: unknown object {t.get('object')!r}")
+    after = tuple(str(a) for a in t.get("after", ()))
+    if t["type"] == "transport":
+        for key in ("from", "to"):
+            if t.get(key) not in cells:
+                raise ConfigError(f"task {tid}: unknown cell {t.get(key)!r} in {key!r}")
+        return TaskSpec(tid, "transport", str(t["object"]), str(t["to"]), source=str(t["from"]), after=after)
+    if t["type"] == "assembly":
+        if t.get("cell") not in cells:
+            raise ConfigError(f"task {tid}: unknown cell {t.get('cell')!r}")
+        return TaskSpec(tid, "assembly", str(t["object"]), str(t["cell"]),
+                        duration=_num(t["duration"], f"task {tid} duration"),
+                        payload=_num(t.get("payload", 0.1), f"task {tid} payload", positive=False), after=after)
+    raise ConfigError(f"task {tid}: unknown type {t['type']!r} (transport | assembly)")
+
+
+def _parse_config(d: dict[str, Any]) -> CellConfig:
+    sim = d.get("sim", {})
+    cells = {cid: CellSpec(cid, _xy(c["position"], f"cell {cid} position"),
+                           _xy(c.get("size", [3.0, 3.0]), f"cell {cid} size")) for cid, c in d["cells"].items()}
+    robots = tuple(_robot(r, cells) for r in d["robots"])
+    objects = {}
+    for o in d["objects"]:
+        if o["cell"] not in cells:
+            raise ConfigError(f"object {o['id']}: unknown cell {o['cell']!r}")
+        objects[str(o["id"])] = ObjectSpec(str(o["id"]), _num(o["weight"], f"object {o['id']} weight"), str(o["cell"]))
+    tasks = tuple(_task(t, cells, objects) for t in d["tasks"])
+    caps = tuple(str(c) for c in d["capabilities"])
+    for needed in ("manipulation", "mobility", *(f"@{c}" for c in cells)):
+        if needed not in caps:
+            raise ConfigError(f"capabilities must include {needed!r}")
+    return CellConfig(
+        name=str(d.get("name", "assembly-cell")), frame_id=str(d.get("frame_id", "map")), capabilities=caps,
+        dt=_num(sim.get("dt", 0.05), "sim.dt"), handling_time=_num(sim.get("handling_time", 3.0), "sim.handling_time",
+                                                                  positive=False),
+        arrive_tolerance=_num(sim.get("arrive_tolerance", 0.05), "sim.arrive_tolerance"),
+        nominal_speed=_num(d.get("nominal_speed", 0.8), "nominal_speed"),
+        cells=cells, robots=robots, objects=objects, tasks=tasks)

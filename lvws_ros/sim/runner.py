@@ -1,0 +1,41 @@
+"""Run the case study in-process with a policy (no ROS): ``lvws sim``."""
+
+from __future__ import annotations
+
+from lvws_ros.core.executor import Policy
+from lvws_ros.core.online import OnlineDecision, OnlineScheduler
+from lvws_ros.core.schedule import Schedule
+from lvws_ros.errors import PolicyError
+from lvws_ros.sim.world import CellSim
+
+__all__ = ["run_offline"]
+
+
+def run_offline(sim: CellSim, policy: Policy, *, max_time: float = 3600.0,
+                frame_every: float | None = None) -> tuple[Schedule, list[OnlineDecision]]:
+    """Run the case study with ``policy`` in-process (no ROS), through the same
+    :class:`~lvws_ros.core.online.OnlineScheduler` the scheduler node uses."""
+    online = OnlineScheduler(policy)
+    decisions: list[OnlineDecision] = []
+    next_frame = 0.0
+    changed = True
+    while not sim.done:
+        if sim.time > max_time:
+            raise PolicyError(f"case study not finished after {max_time:g} s of sim time "
+                               f"(status {sim.status})")
+        if changed:
+            online.offer_team(sim.team_snapshot())
+            online.offer_graph(sim.graph_snapshot())
+            d = online.decide()
+            if d is not None:
+                decisions.append(d)
+                for task, robots in d.assignments:
+                    sim.assign(task, robots)
+        if frame_every is not None and sim.time >= next_frame - 1e-9:
+            sim.record_frame()
+            next_frame += frame_every
+        changed = bool(sim.step())
+    if frame_every is not None:
+        sim.record_frame()
+    latency = sum(d.latency for d in decisions)
+    return sim.schedule(policy.name, len(decisions), latency), decisions

@@ -1,0 +1,319 @@
+"""The assembly-cell case study (paper section IV-B) as a pymunk 2D kinematic world.
+
+No ROS here: :class:`CellSim` takes a :class:`~lvws_ros.sim.config.CellConfig`,
+executes subteam assignments and reports what happened; the ``cell_sim`` node, the
+offline runner and the tests drive it.
+
+* Panda arms are static bodies at their cell; an arm works only on an object at its cell.
+* Jackals and the Husky are kinematic bodies driven at bounded speed (travel takes
+  time, nothing teleports). A transport task drives every member to the object, loads
+  it (handling time), carries it at the slowest member's speed, and unloads it. The
+  members' payloads must add up to the object's weight (Eq. 11), so only a Jackal +
+  Husky subteam can carry Obj1 (7 units).
+* The scheduling instance (:attr:`CellSim.inst`) carries nominal durations; the
+  executed schedule (:meth:`CellSim.schedule`) carries what really happened, approach
+  drives and real speeds included, and is valid by the rules of formats.md for the
+  executed instance (:meth:`CellSim.executed_instance`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import pymunk
+
+from lvws_ros.core.executor import TaskStatus
+from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot
+from lvws_ros.core.problem import Instance, Robot, Task
+from lvws_ros.core.schedule import Assignment, Schedule
+from lvws_ros.errors import AssignmentRejected
+from lvws_ros.sim.config import ARM_KINDS, MOBILE_KINDS, CellConfig, RobotSpec, TaskSpec
+
+__all__ = ["CellSim", "Event", "Frame", "build_instance"]
+
+QUEUED, READY, ASSIGNED, DONE = TaskStatus.QUEUED, TaskStatus.READY, TaskStatus.ASSIGNED, TaskStatus.DONE
+
+
+def _dist(a: Sequence[float], b: Sequence[float]) -> float:
+    return math.hypot(a[0] - b[0], a[1] - b[1])
+
+
+def build_instance(cfg: CellConfig) -> Instance:
+    """The scheduling problem of the case study, with nominal durations."""
+    caps = cfg.capabilities
+
+    def vec(*names: str) -> tuple[int, ...]:
+        return tuple(int(c in names) for c in caps)
+
+    robots = tuple(
+        Robot(r.id, vec("manipulation", f"@{r.cell}") if r.kind in ARM_KINDS else vec("mobility"), r.payload,
+              {"kind": r.kind}) for r in cfg.robots)
+    tasks = []
+    for t in cfg.tasks:
+        weight = cfg.objects[t.object].weight
+        if t.type == "transport":
+            assert t.source is not None
+            travel = _dist(cfg.cells[t.source].position, cfg.cells[t.cell].position) / cfg.nominal_speed
+            tasks.append(Task(t.id, vec("mobility"), weight, round(2 * cfg.handling_time + travel, 3), t.after,
+                              {"type": t.type, "object": t.object, "from": t.source, "to": t.cell}))
+        else:
+            tasks.append(Task(t.id, vec("manipulation", f"@{t.cell}"), t.payload, t.duration, t.after,
+                              {"type": t.type, "object": t.object, "cell": t.cell}))
+    return Instance(cfg.name, caps, robots, tuple(tasks))
+
+
+@dataclass
+class _Job:
+    """A task being executed: its subteam and the phase it is in."""
+
+    task: TaskSpec
+    team: tuple[str, ...]
+    phase: str  # transport: approach, load, carry, unload; assembly: work
+    timer: float = 0.0
+    targets: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """Positions and work at one instant, for rendering."""
+
+    time: float
+    positions: dict[str, tuple[float, float]]
+    robot_task: dict[str, str | None]
+    done: int
+
+
+@dataclass
+class Event:
+    time: float
+    kind: str  # finished
+    task: str
+    robots: tuple[str, ...]
+
+
+class CellSim:
+    """The case-study world. ``assign`` starts tasks, ``step`` advances sim time by dt."""
+
+    def __init__(self, cfg: CellConfig) -> None:
+        self.cfg = cfg
+        self.inst = build_instance(self.cfg)
+        self.space = pymunk.Space()
+        self.time = 0.0
+        self.bodies: dict[str, pymunk.Body] = {}
+        for cell in self.cfg.cells.values():  # cell floors: sensors, robots drive over them
+            floor = pymunk.Body(body_type=pymunk.Body.STATIC)
+            floor.position = cell.position
+            shape = pymunk.Poly.create_box(floor, cell.size)
+            shape.sensor = True
+            self.space.add(floor, shape)
+        self.robot_spec = {r.id: r for r in self.cfg.robots}
+        for r in self.cfg.robots:
+            kind = pymunk.Body.STATIC if r.kind in ARM_KINDS else pymunk.Body.KINEMATIC
+            body = pymunk.Body(body_type=kind)
+            body.position = self._arm_base(r) if r.kind in ARM_KINDS else r.start
+            self.space.add(body, pymunk.Circle(body, 0.35 if r.kind == "jackal" else 0.5))
+            self.bodies[r.id] = body
+        self.object_cell: dict[str, str | None] = {}
+        for o in self.cfg.objects.values():
+            body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+            body.position = self.cfg.cells[o.cell].position
+            self.space.add(body, pymunk.Poly.create_box(body, (0.4 + 0.08 * o.weight,) * 2))
+            self.bodies[o.id] = body
+            self.object_cell[o.id] = o.cell
+        self.status = {t.id: QUEUED for t in self.cfg.tasks}
+        self.start: dict[str, float] = {}
+        self.end: dict[str, float] = {}
+        self.team: dict[str, tuple[str, ...]] = {}
+        self.robot_task: dict[str, str | None] = {r.id: None for r in self.cfg.robots}
+        self.jobs: dict[str, _Job] = {}
+        self.trace: list[Frame] = []
+        self._task_spec = {t.id: t for t in self.cfg.tasks}
+        self._refresh_ready()
+
+    # -- geometry ---------------------------------------------------------------------
+    def _arm_base(self, r: RobotSpec) -> tuple[float, float]:
+        x, y = self.cfg.cells[str(r.cell)].position
+        return (x, y - 1.0)
+
+    def position(self, body_id: str) -> tuple[float, float]:
+        p = self.bodies[body_id].position
+        return (float(p.x), float(p.y))
+
+    def _slot(self, cell: str, k: int, n: int) -> tuple[float, float]:
+        """Where member k of n stands around an object at ``cell`` (fixed offsets, so a
+        team carrying together keeps its formation)."""
+        x, y = self.cfg.cells[cell].position
+        ang = math.pi / 2 + 2 * math.pi * k / max(n, 1)
+        return (x + 0.8 * math.cos(ang), y + 0.8 * math.sin(ang))
+
+    # -- state ------------------------------------------------------------------------
+    @property
+    def done(self) -> bool:
+        return all(s == DONE for s in self.status.values())
+
+    @property
+    def makespan(self) -> float | None:
+        return max(self.end.values()) if self.done and self.end else None
+
+    def _refresh_ready(self) -> None:
+        for t in self.cfg.tasks:
+            if self.status[t.id] == QUEUED and all(self.status[a] == DONE for a in t.after):
+                self.status[t.id] = READY
+
+    def check_assignment(self, task_id: str, robot_ids: Sequence[str]) -> None:
+        """Raise AssignmentRejected unless the world can execute this assignment now."""
+        if task_id not in self.status:
+            raise AssignmentRejected(f"unknown task {task_id!r}")
+        if self.status[task_id] != READY:
+            names = {QUEUED: "queued", ASSIGNED: "already assigned", DONE: "done"}
+            raise AssignmentRejected(f"task {task_id} is {names[self.status[task_id]]}, not ready")
+        if not robot_ids or len(set(robot_ids)) != len(robot_ids):
+            raise AssignmentRejected(f"task {task_id}: empty or repeated robot list {list(robot_ids)}")
+        for rid in robot_ids:
+            if rid not in self.robot_task:
+                raise AssignmentRejected(f"task {task_id}: unknown robot {rid!r}")
+            if self.robot_task[rid] is not None:
+                raise AssignmentRejected(f"task {task_id}: robot {rid} is busy with {self.robot_task[rid]}")
+        spec = self._task_spec[task_id]
+        obj = self.cfg.objects[spec.object]
+        kinds = [self.robot_spec[r].kind for r in robot_ids]
+        if spec.type == "transport":
+            if any(k not in MOBILE_KINDS for k in kinds):
+                raise AssignmentRejected(f"task {task_id}: only mobile robots can transport, got {kinds}")
+            if self.object_cell[obj.id] != spec.source:
+                raise AssignmentRejected(f"task {task_id}: {obj.id} is not at {spec.source}")
+            total = sum(self.robot_spec[r].payload for r in robot_ids)
+            if total < obj.weight:
+                raise AssignmentRejected(f"task {task_id}: {obj.id} weighs {obj.weight:g}, subteam "
+                                         f"{list(robot_ids)} carries only {total:g}")
+        else:
+            if len(robot_ids) != 1 or kinds[0] not in ARM_KINDS:
+                raise AssignmentRejected(f"task {task_id}: assembly needs one arm, got {list(robot_ids)}")
+            arm = self.robot_spec[robot_ids[0]]
+            if arm.cell != spec.cell:
+                raise AssignmentRejected(f"task {task_id}: {arm.id} is at {arm.cell}, the work is at {spec.cell}")
+            if self.object_cell[obj.id] != spec.cell:
+                raise AssignmentRejected(f"task {task_id}: {obj.id} is not at {spec.cell} "
+                                         f"(it is at {self.object_cell[obj.id] or 'a robot'})")
+            if arm.payload < spec.payload:
+                raise AssignmentRejected(f"task {task_id}: {arm.id} handles {arm.payload:g}, the part weighs "
+                                         f"{spec.payload:g}")
+
+    def assign(self, task_id: str, robot_ids: Sequence[str]) -> None:
+        """Start ``task_id`` with the subteam ``robot_ids`` now (raises AssignmentRejected)."""
+        self.check_assignment(task_id, robot_ids)
+        team = tuple(robot_ids)
+        spec = self._task_spec[task_id]
+        self.status[task_id] = ASSIGNED
+        self.start[task_id] = self.time
+        self.team[task_id] = team
+        for rid in team:
+            self.robot_task[rid] = task_id
+        if spec.type == "transport":
+            assert spec.source is not None
+            job = _Job(spec, team, "approach",
+                       targets={r: self._slot(spec.source, k, len(team)) for k, r in enumerate(team)})
+        else:
+            job = _Job(spec, team, "work", timer=spec.duration)
+        self.jobs[task_id] = job
+
+    # -- dynamics ---------------------------------------------------------------------
+    def _drive(self, rid: str, target: tuple[float, float], speed: float, dt: float) -> bool:
+        """Set a velocity toward ``target`` (no overshoot); True when already there."""
+        body = self.bodies[rid]
+        dx, dy = target[0] - body.position.x, target[1] - body.position.y
+        d = math.hypot(dx, dy)
+        if d <= self.cfg.arrive_tolerance:
+            body.velocity = (0.0, 0.0)
+            return True
+        v = min(speed, d / dt)
+        body.velocity = (v * dx / d, v * dy / d)
+        return False
+
+    def step(self) -> list[Event]:
+        """Advance the world by one dt; returns the tasks that finished."""
+        dt = self.cfg.dt
+        for body in self.bodies.values():
+            if body.body_type == pymunk.Body.KINEMATIC:
+                body.velocity = (0.0, 0.0)
+        finished: list[str] = []
+        for tid, job in self.jobs.items():
+            spec = job.task
+            if job.phase == "work":
+                job.timer -= dt
+                if job.timer <= 1e-9:
+                    finished.append(tid)
+            elif job.phase == "approach":
+                arrived = [self._drive(r, job.targets[r], self.robot_spec[r].speed, dt) for r in job.team]
+                if all(arrived):
+                    job.phase, job.timer = "load", self.cfg.handling_time
+                    self.object_cell[spec.object] = None
+            elif job.phase == "load":
+                job.timer -= dt
+                if job.timer <= 1e-9:
+                    job.phase = "carry"
+                    job.targets = {r: self._slot(spec.cell, k, len(job.team)) for k, r in enumerate(job.team)}
+            elif job.phase == "carry":
+                speed = min(self.robot_spec[r].speed for r in job.team)
+                arrived = [self._drive(r, job.targets[r], speed, dt) for r in job.team]
+                self.bodies[spec.object].velocity = self.bodies[job.team[0]].velocity
+                if all(arrived):
+                    job.phase, job.timer = "unload", self.cfg.handling_time
+            elif job.phase == "unload":
+                job.timer -= dt
+                if job.timer <= 1e-9:
+                    finished.append(tid)
+        self.space.step(dt)
+        self.time = round(self.time + dt, 9)
+        out = []
+        for tid in finished:
+            job = self.jobs.pop(tid)
+            if job.task.type == "transport":
+                self.object_cell[job.task.object] = job.task.cell
+                self.bodies[job.task.object].position = self.cfg.cells[job.task.cell].position
+            self.status[tid] = DONE
+            self.end[tid] = self.time
+            for rid in job.team:
+                self.robot_task[rid] = None
+            out.append(Event(self.time, "finished", tid, job.team))
+        if out:
+            self._refresh_ready()
+        return out
+
+    def record_frame(self) -> None:
+        """Keep the current positions for rendering (see lvws_ros.sim.render)."""
+        self.trace.append(Frame(self.time, {k: self.position(k) for k in self.bodies}, dict(self.robot_task),
+                                sum(s == DONE for s in self.status.values())))
+
+    # -- views for the scheduler --------------------------------------------------------
+    def team_snapshot(self) -> TeamSnapshot:
+        robots = []
+        for r, caps in zip(self.cfg.robots, (rb.capabilities for rb in self.inst.robots), strict=True):
+            task = self.robot_task[r.id]
+            busy = 0.0
+            if task is not None:
+                busy = max(0.0, self.start[task] + self.inst.tasks[self.inst.task_index[task]].duration - self.time)
+            x, y = self.position(r.id)
+            robots.append(RobotInfo(r.id, r.kind, task is None, caps, r.payload, task or "", busy, (x, y, 0.0)))
+        return TeamSnapshot(self.time, self.cfg.capabilities, tuple(robots))
+
+    def graph_snapshot(self) -> GraphSnapshot:
+        tasks = []
+        for t in self.inst.tasks:
+            tasks.append(TaskInfo(t.id, self.status[t.id], t.capabilities, t.payload, t.duration, t.after,
+                                  self.team.get(t.id, ()), self.start.get(t.id), self.end.get(t.id)))
+        return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks))
+
+    # -- results ----------------------------------------------------------------------
+    def executed_instance(self) -> Instance:
+        """The instance with each finished task's executed duration (travel included)."""
+        tasks = tuple(Task(t.id, t.capabilities, t.payload,
+                           (self.end[t.id] - self.start[t.id]) if t.id in self.end else t.duration, t.after, t.extra)
+                      for t in self.inst.tasks)
+        return Instance(self.inst.name, self.inst.capabilities, self.inst.robots, tasks)
+
+    def schedule(self, policy: str, decisions: int = 0, compute: float = 0.0) -> Schedule:
+        out = [Assignment(t, self.team[t], self.start[t], self.end[t]) for t in self.end]
+        return Schedule.from_assignments(self.inst.name, policy, out, decisions, compute)

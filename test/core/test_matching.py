@@ -1,0 +1,89 @@
+"""Subteam matching of Eqs. 7-11: greedy obeys the constraints, exact is optimal,
+and how often greedy reaches the exact optimum."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lvws_ros.cli.bench import random_matching_case
+from lvws_ros.core.matching import greedy_match
+from lvws_ros.core.subteams import covers
+from lvws_ros.errors import PolicyError
+from lvws_ros.learning.loss import feasibility_mask
+from lvws_ros.policies.exact import exact_match
+
+
+def assert_valid(match, r, robot_caps, robot_payload, task_caps, task_payload):
+    n, m = r.shape[0], r.shape[1] - 1
+    used = [i for team in match.teams.values() for i in team] + list(match.waiting)
+    assert len(used) == len(set(used)), "a robot in two places (Eq. 9)"
+    assert sorted(used) == list(range(n)), "every robot takes a task or waits"
+    for j, team in match.teams.items():
+        assert 0 <= j < m
+        idx = list(team)
+        assert covers(robot_caps[idx], robot_payload[idx], task_caps[j], task_payload[j]), "Eqs. 10-11"
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_greedy_obeys_constraints(seed):
+    rng = np.random.default_rng(seed)
+    case = random_matching_case(rng, int(rng.integers(1, 9)), int(rng.integers(1, 8)))
+    match = greedy_match(*case)
+    assert_valid(match, *case)
+    r = case[0]
+    assert match.reward == pytest.approx(
+        sum(r[i, j] for j, t in match.teams.items() for i in t) + sum(r[i, -1] for i in match.waiting))
+
+
+def test_greedy_vs_exact_on_random_cases():
+    rng = np.random.default_rng(7)
+    equal = 0
+    cases = 60
+    for _ in range(cases):
+        case = random_matching_case(rng, int(rng.integers(2, 7)), int(rng.integers(1, 6)))
+        g = greedy_match(*case)
+        e = exact_match(*case, time_limit=10)
+        assert_valid(e, *case)
+        assert e.reward >= g.reward - 1e-5, "exact is never worse than greedy"
+        equal += abs(e.reward - g.reward) < 1e-5
+    print(f"greedy == exact on {equal}/{cases} random cases")
+    assert equal >= cases // 4  # greedy is a heuristic, but not a bad one
+
+
+def test_partial_subteam_releases_its_robots():
+    # r0 joins t0 (needs payload 10, two robots), r1 takes t1, r2 prefers to wait: t0 can
+    # no longer be completed, so r0 is released and takes its next best option, t2.
+    robot_caps = np.ones((3, 1), dtype=bool)
+    robot_payload = np.array([5.0, 5.0, 5.0])
+    task_caps = np.ones((3, 1), dtype=bool)
+    task_payload = np.array([10.0, 5.0, 5.0])
+    r = np.array([
+        [5.0, 0.0, 0.1, -1.0],
+        [0.0, 4.0, 0.0, -1.0],
+        [0.0, 0.0, 0.0, 3.0],
+    ])
+    m = greedy_match(r, robot_caps, robot_payload, task_caps, task_payload)
+    assert m.teams == {1: (1,), 2: (0,)}
+    assert m.waiting == (2,)
+
+
+def test_idle_column_makes_robots_wait():
+    robot_caps = np.array([[1], [1]], dtype=bool)
+    task_caps = np.array([[1]], dtype=bool)
+    r = np.array([[1.0, 2.0], [3.0, -1.0]])
+    m = greedy_match(r, robot_caps, np.array([5.0, 5.0]), task_caps, np.array([1.0]))
+    assert m.teams == {0: (1,)} and m.waiting == (0,)
+
+
+def test_shape_and_value_errors():
+    caps = np.ones((2, 1), dtype=bool)
+    with pytest.raises(ValueError, match="shape"):
+        greedy_match(np.zeros((2, 2)), caps, np.ones(2), caps, np.ones(2))
+    with pytest.raises(PolicyError, match="NaN"):
+        greedy_match(np.full((2, 3), np.nan), caps, np.ones(2), caps, np.ones(2))
+
+
+def test_feasibility_mask_has_idle_column():
+    x = feasibility_mask(np.array([[1, 0], [0, 1]], bool), np.array([[1, 0]], bool), np.ones(2), np.zeros(1))
+    assert x.tolist() == [[True, True], [False, True]]

@@ -1,0 +1,126 @@
+"""OnlineScheduler (the scheduler node's core) on snapshots: when it decides, and that it
+never assigns a busy robot or an unready task whatever order messages come in."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from conftest import CASE_STUDY
+from lvws_ros.core.online import OnlineScheduler, RobotInfo, TaskInfo
+from lvws_ros.errors import InstanceError
+from lvws_ros.registry import make_policy
+from lvws_ros.sim.config import load_cell_config
+from lvws_ros.sim.world import CellSim
+
+
+def fresh() -> tuple[CellSim, OnlineScheduler]:
+    sim = CellSim(load_cell_config(CASE_STUDY))
+    online = OnlineScheduler(make_policy("grp"))
+    online.offer_team(sim.team_snapshot())
+    online.offer_graph(sim.graph_snapshot())
+    return sim, online
+
+
+def test_first_decision_and_no_repeat_on_duplicates():
+    sim, online = fresh()
+    d = online.decide()
+    assert d is not None and d.step == 0
+    assert {t for t, _ in d.assignments} == {"t01", "t03", "t07"}
+    assert set(d.waiting) == {"jackal_1", "jackal_2", "husky_1"}
+    # the same snapshots again (duplicates), before the world acknowledged: nothing new
+    online.offer_team(sim.team_snapshot())
+    online.offer_graph(sim.graph_snapshot())
+    assert online.decide() is None
+
+
+def test_decides_again_when_a_robot_becomes_free():
+    sim, online = fresh()
+    d = online.decide()
+    assert d is not None
+    for t, robots in d.assignments:
+        sim.assign(t, robots)
+    online.offer_team(sim.team_snapshot())
+    online.offer_graph(sim.graph_snapshot())
+    assert online.decide() is None and not online.pending  # acknowledged, nothing new
+    while not sim.step():
+        pass
+    online.offer_team(sim.team_snapshot())
+    online.offer_graph(sim.graph_snapshot())
+    d2 = online.decide()
+    assert d2 is not None and d2.step == 1 and ("t02", ("panda_1",)) in d2.assignments
+
+
+def test_out_of_order_snapshots_are_dropped():
+    sim, online = fresh()
+    old_team, old_graph = sim.team_snapshot(), sim.graph_snapshot()
+    sim.assign("t01", ["panda_1"])
+    for _ in range(10):
+        sim.step()
+    assert online.offer_team(sim.team_snapshot()) and online.offer_graph(sim.graph_snapshot())
+    assert not online.offer_team(old_team) and not online.offer_graph(old_graph)
+    assert online.dropped == 2
+    d = online.decide()
+    assert d is not None and all("panda_1" not in r for _, r in d.assignments)
+
+
+def test_a_stale_team_message_cannot_free_a_busy_robot():
+    sim, online = fresh()
+    stale_team = sim.team_snapshot()  # says panda_1 is available
+    sim.assign("t01", ["panda_1"])
+    graph = sim.graph_snapshot()  # says t01 runs on panda_1
+    online.offer_team(stale_team)
+    online.offer_graph(graph)
+    d = online.decide()
+    assert d is not None
+    assert all("panda_1" not in r for _, r in d.assignments)
+    assert "panda_1" not in d.waiting
+
+
+def test_unacknowledged_assignments_are_offered_again_after_the_timeout():
+    sim, online = fresh()
+    first = online.decide()
+    assert first is not None
+    later = sim.team_snapshot()
+    # the world never executed it: 10 s later it still shows every task ready
+    online.offer_team(dataclasses.replace(later, stamp=10.0))
+    online.offer_graph(dataclasses.replace(sim.graph_snapshot(), stamp=10.0))
+    again = online.decide()
+    assert again is not None
+    assert {t for t, _ in again.assignments} == {t for t, _ in first.assignments}
+
+
+def test_capabilities_must_agree():
+    sim, online = fresh()
+    team = sim.team_snapshot()
+    online.offer_team(dataclasses.replace(team, capability_names=("a", "b", "c", "d", "e")))
+    with pytest.raises(InstanceError, match="differ"):
+        online.decide()
+
+
+def test_unknown_prerequisite_is_an_instance_error():
+    sim, online = fresh()
+    graph = sim.graph_snapshot()
+    bad = (dataclasses.replace(graph.tasks[0], prerequisites=("t99",)), *graph.tasks[1:])
+    online.offer_graph(dataclasses.replace(graph, tasks=bad))
+    with pytest.raises(InstanceError, match="t99"):
+        online.decide()
+
+
+def test_hand_made_snapshots():
+    """A two-robot team where only a subteam can do the task."""
+    from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
+
+    team = TeamSnapshot(0.0, ("lift", "drive"), (
+        RobotInfo("a", "x", True, (1, 0), 2.0), RobotInfo("b", "y", True, (0, 1), 2.0),
+        RobotInfo("c", "y", False, (1, 1), 9.0, "t0", 3.0)))
+    graph = GraphSnapshot(0.0, ("lift", "drive"), (
+        TaskInfo("t0", 2, (1, 0), 1.0, 5.0, (), ("c",), 0.0),
+        TaskInfo("t1", 1, (1, 1), 3.0, 2.0),
+        TaskInfo("t2", 0, (0, 1), 1.0, 2.0, ("t0",))))
+    online = OnlineScheduler(make_policy("grp"))
+    online.offer_team(team)
+    online.offer_graph(graph)
+    d = online.decide()
+    assert d is not None and d.assignments == (("t1", ("a", "b")),) and d.waiting == ()

@@ -1,0 +1,124 @@
+"""Every policy yields valid schedules (formats.md rules) on generated instances,
+including one robot and one task; bad policies are stopped with a message."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lvws_ros.core.datasets import random_instance
+from lvws_ros.core.executor import Decision, State, simulate
+from lvws_ros.core.schedule import check_schedule
+from lvws_ros.errors import PolicyError
+from lvws_ros.registry import POLICY_NAMES, make_policy
+
+BASELINES = ["grp", "rand", "rand_subteam"]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 8), m=st.integers(1, 20),
+       policy=st.sampled_from(BASELINES), policy_seed=st.integers(0, 1000))
+def test_baselines_give_valid_schedules(seed, n, m, policy, policy_seed):
+    inst = random_instance(np.random.default_rng(seed), n, m, "h")
+    res = simulate(inst, make_policy(policy, seed=policy_seed))
+    assert check_schedule(inst, res.schedule) == []
+    assert res.schedule.decisions == len(res.steps) >= 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 5), m=st.integers(1, 9))
+def test_exact_policy_gives_valid_optimal_schedules(seed, n, m):
+    inst = random_instance(np.random.default_rng(seed), n, m, "h")
+    policy = make_policy("exact", time_limit=20, workers=2)
+    res = simulate(inst, policy)
+    assert check_schedule(inst, res.schedule) == []
+    assert policy.result.status == "optimal"
+    assert res.schedule.makespan == pytest.approx(policy.result.makespan)
+    for name in BASELINES:
+        assert simulate(inst, make_policy(name)).schedule.makespan >= res.schedule.makespan - 1e-9
+
+
+@pytest.mark.parametrize("n,m", [(1, 1), (1, 6), (5, 1)])
+def test_edge_sizes(n, m):
+    inst = random_instance(np.random.default_rng(3), n, m, "edge")
+    for name in [*BASELINES, "exact"]:
+        res = simulate(inst, make_policy(name, workers=2) if name == "exact" else make_policy(name))
+        assert check_schedule(inst, res.schedule) == [], name
+
+
+def test_single_robot_makespan_is_sum_of_durations():
+    inst = random_instance(np.random.default_rng(11), 1, 7, "solo")
+    for name in BASELINES:
+        assert simulate(inst, make_policy(name)).schedule.makespan == pytest.approx(inst.durations.sum())
+
+
+def test_same_seed_same_schedule():
+    inst = random_instance(np.random.default_rng(5), 6, 18, "seeded")
+    for name in ["rand", "rand_subteam"]:
+        a = simulate(inst, make_policy(name, seed=4)).schedule.assignments
+        b = simulate(inst, make_policy(name, seed=4)).schedule.assignments
+        assert a == b
+
+
+class Lazy:
+    name = "lazy"
+
+    def reset(self, instance):
+        pass
+
+    def decide(self, state: State) -> Decision:
+        return Decision((), tuple(state.free_robots()))
+
+
+class Cheater:
+    name = "cheater"
+
+    def reset(self, instance):
+        pass
+
+    def decide(self, state: State) -> Decision:
+        queued = [j for j in range(state.instance.num_tasks) if j not in state.ready_tasks()]
+        return Decision(((queued[0], (0,)),)) if queued else Decision(((state.ready_tasks()[0], (0,)),))
+
+
+def test_no_progress_is_an_error_not_a_loop():
+    inst = random_instance(np.random.default_rng(1), 3, 4, "x")
+    with pytest.raises(PolicyError, match="no progress"):
+        simulate(inst, Lazy())
+
+
+def test_unready_task_or_uncovering_team_is_rejected():
+    inst = random_instance(np.random.default_rng(2), 3, 6, "x")
+    with pytest.raises(PolicyError, match=r"not ready|does not cover"):
+        simulate(inst, Cheater())
+
+
+def test_policy_names():
+    assert set(BASELINES) | {"exact"} <= set(POLICY_NAMES)
+    with pytest.raises(PolicyError, match="unknown policy"):
+        make_policy("nope")
+
+
+def test_voluntary_waits_are_free_robots_kept_from_a_task_they_could_start():
+    from lvws_ros.core.executor import voluntary_waits
+    from lvws_ros.core.problem import Instance, Robot, Task
+
+    inst = Instance("w", ("a", "b"),
+                    (Robot("r0", (1, 0), 5.0), Robot("r1", (1, 0), 5.0), Robot("r2", (0, 1), 5.0)),
+                    (Task("heavy", (1, 0), 8.0, 2.0), Task("b_job", (0, 1), 1.0, 1.0),
+                     Task("later", (1, 0), 1.0, 1.0, ("heavy",))))
+    state = State.initial(inst)
+    assert state.ready_tasks() == [0, 1]
+    # both a-robots wait: together they could carry "heavy" (8 > 5 each), so both waits are voluntary
+    assert voluntary_waits(state, Decision(((1, (2,)),))) == {0: (0,), 1: (0,)}
+    # r0 + r1 on "heavy": r2 left while b_job is ready waits voluntarily
+    assert voluntary_waits(state, Decision(((0, (0, 1)),))) == {2: (1,)}
+    # everything ready is taken: nobody waits voluntarily
+    assert voluntary_waits(state, Decision(((0, (0, 1)), (1, (2,))))) == {}
+    # once r2 has started b_job, only "heavy" is ready: the a-robots still could carry it
+    state.start(1, (2,))
+    assert voluntary_waits(state, Decision()) == {0: (0,), 1: (0,)}
+    state.robot_free_at[1] = 5.0  # r1 busy: r0 alone cannot carry "heavy"
+    assert voluntary_waits(state, Decision()) == {}

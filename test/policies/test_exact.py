@@ -1,0 +1,109 @@
+"""The CP-SAT expert: brute-force optimal on tiny instances, never worse than the
+baselines, and correct when resuming from a mid-run state."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from lvws_ros.core.datasets import DATASETS, dataset_instance, random_instance
+from lvws_ros.core.executor import TaskStatus, simulate
+from lvws_ros.core.schedule import check_schedule
+from lvws_ros.core.subteams import covers
+from lvws_ros.policies.baselines import GreedyPayloadPolicy
+from lvws_ros.policies.exact import solve_exact
+from lvws_ros.registry import make_policy
+
+
+def brute_force_makespan(inst) -> float:
+    """Min over every covering subteam (not only minimal ones) per task and every
+    precedence-respecting task order of the list schedule: each task as early as its
+    prerequisites and robots allow. Every semi-active schedule arises this way."""
+    n, m = inst.num_robots, inst.num_tasks
+    subsets = [s for k in range(1, n + 1) for s in itertools.combinations(range(n), k)]
+    teams = [[s for s in subsets if covers(inst.robot_caps[list(s)], inst.robot_payload[list(s)],
+                                           inst.task_caps[j], inst.tasks[j].payload)] for j in range(m)]
+    orders = [p for p in itertools.permutations(range(m))
+              if all(p.index(q) < p.index(j) for j in range(m) for q in inst.prerequisites[j])]
+    best = float("inf")
+    for choice in itertools.product(*teams):
+        for order in orders:
+            free = [0.0] * n
+            end = [0.0] * m
+            for j in order:
+                s = max([*(end[q] for q in inst.prerequisites[j]), *(free[r] for r in choice[j])])
+                end[j] = s + inst.tasks[j].duration
+                for r in choice[j]:
+                    free[r] = end[j]
+            best = min(best, max(end))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_expert_matches_brute_force(seed):
+    rng = np.random.default_rng(1000 + seed)
+    inst = random_instance(rng, int(rng.integers(1, 4)), int(rng.integers(1, 5)), f"tiny{seed}")
+    res = solve_exact(inst, workers=2)
+    assert res.status == "optimal" and res.bound == pytest.approx(res.makespan)
+    assert check_schedule(inst, res.schedule) == []
+    assert res.makespan == pytest.approx(brute_force_makespan(inst))
+
+
+def test_expert_never_worse_than_baselines_on_dataset_i():
+    spec = DATASETS["I"]
+    for k in range(800, 808):
+        inst = dataset_instance(spec, k, seed=0)
+        res = solve_exact(inst, workers=2, time_limit=60)
+        assert res.status == "optimal", inst.name
+        assert check_schedule(inst, res.schedule) == []
+        for name in ["grp", "rand", "rand_subteam"]:
+            assert simulate(inst, make_policy(name, seed=k)).schedule.makespan >= res.makespan - 1e-9
+
+
+def test_fractional_durations_are_scaled_exactly():
+    rng = np.random.default_rng(3)
+    base = random_instance(rng, 3, 4, "frac")
+    from dataclasses import replace
+
+    inst = replace(base, tasks=tuple(replace(t, duration=t.duration / 4) for t in base.tasks))
+    res = solve_exact(inst, workers=2)
+    assert res.status == "optimal" and res.exact_scale
+    assert res.makespan == pytest.approx(brute_force_makespan(inst))
+
+
+@pytest.mark.parametrize("index", [800, 801, 802])
+@pytest.mark.parametrize("step", [1, 3, 6])
+def test_expert_resumes_from_mid_run_state(index, step):
+    inst = dataset_instance(DATASETS["I"], index, seed=0)
+    grp = simulate(inst, GreedyPayloadPolicy(), record_states=True)
+    state = grp.steps[min(step, len(grp.steps) - 1)].state
+    assert state is not None
+    res = solve_exact(inst, state=state, workers=2)
+    assert res.status == "optimal"
+    sched = res.schedule
+    assert check_schedule(inst, sched) == []
+    by_task = sched.by_task()
+    for j, t in enumerate(inst.tasks):
+        a = by_task[t.id]
+        if state.task_status[j] >= TaskStatus.ASSIGNED:  # fixed: started before the state
+            assert a.start == pytest.approx(state.task_start[j])
+            assert tuple(inst.robot_index[r] for r in a.robots) == state.task_team[j]
+        else:
+            assert a.start >= state.time - 1e-9
+            for r in a.robots:
+                assert a.start >= state.robot_free_at[inst.robot_index[r]] - 1e-9
+    # Optimal from here: no worse than GRP's own continuation, no better than from scratch.
+    assert res.makespan <= grp.schedule.makespan + 1e-9
+    assert res.makespan >= solve_exact(inst, workers=2).makespan - 1e-9
+    # The exact policy, started at that state, reaches the same makespan.
+    cont = simulate(inst, make_policy("exact", workers=2), state=state)
+    assert cont.schedule.makespan == pytest.approx(res.makespan)
+
+
+def test_resuming_on_the_optimal_path_keeps_the_optimum():
+    inst = dataset_instance(DATASETS["I"], 805, seed=0)
+    opt = simulate(inst, make_policy("exact", workers=2), record_states=True)
+    for rec in opt.steps[1::3]:
+        assert solve_exact(inst, state=rec.state, workers=2).makespan == pytest.approx(opt.schedule.makespan)
