@@ -9,9 +9,9 @@ schedule obeys the six validity rules is :func:`lvws_ros.core.schedule.check_sch
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule
@@ -70,6 +70,18 @@ def dumps(data: Mapping[str, Any]) -> str:
         else:
             lines.append(f"  {json.dumps(key)}: {json.dumps(value, allow_nan=False)}")
     return "{\n" + ",\n".join(lines) + "\n}\n"
+
+
+T = TypeVar("T")
+
+
+def _load(path: str | Path, what: str, from_dict: Callable[[Any], T], error: type[LvwsError]) -> T:
+    """Read a JSON file and build from it; every error names the file."""
+    data = read_json(path, what, error)
+    try:
+        return from_dict(data)
+    except error as exc:
+        raise error(f"{path}: {exc}") from None
 
 
 def _write(text: str, path: str | Path) -> None:
@@ -161,11 +173,7 @@ def instance_to_dict(inst: Instance) -> dict[str, Any]:
 
 
 def load_instance(path: str | Path) -> Instance:
-    data = read_json(path, "instance")
-    try:
-        return instance_from_dict(data)
-    except InstanceError as exc:
-        raise InstanceError(f"{path}: {exc}") from None
+    return _load(path, "instance", instance_from_dict, InstanceError)
 
 
 def save_instance(inst: Instance, path: str | Path) -> None:
@@ -238,11 +246,7 @@ def schedule_from_dict(data: Any) -> Schedule:
 
 
 def load_schedule(path: str | Path) -> Schedule:
-    data = read_json(path, "schedule", ScheduleError)
-    try:
-        return schedule_from_dict(data)
-    except ScheduleError as exc:
-        raise ScheduleError(f"{path}: {exc}") from None
+    return _load(path, "schedule", schedule_from_dict, ScheduleError)
 
 
 def save_schedule(s: Schedule, path: str | Path) -> None:

@@ -49,6 +49,27 @@ def match_reward(r: FloatArray, teams: dict[int, tuple[int, ...]], waiting: tupl
     return float(sum(r[i, j] for j, team in teams.items() for i in team) + sum(r[i, m] for i in waiting))
 
 
+def _best_pick(r: FloatArray, ok: BoolArray, free: BoolArray) -> tuple[int, int]:
+    """(robot, column) of the largest reward among the allowed (robot, task) pairs and
+    the free robots' idle column (column m)."""
+    m = r.shape[1] - 1
+    scores = np.where(ok, r[:, :m], -np.inf)
+    idle = np.where(free, r[:, m], -np.inf)
+    i, j = divmod(int(np.argmax(np.concatenate([scores, idle[:, None]], axis=1))), m + 1)
+    return i, j
+
+
+def _drop_redundant(team: list[int], rewards: FloatArray, robot_caps: BoolArray, robot_payload: FloatArray,
+                    need_caps: BoolArray, need_payload: float) -> list[int]:
+    """Members made redundant by later ones leave, lowest reward first: the subteam still
+    covers the task and is inclusion-minimal."""
+    for q in sorted(team, key=lambda q: rewards[q]):
+        rest = [x for x in team if x != q]
+        if rest and covers(robot_caps[rest], robot_payload[rest], need_caps, need_payload):
+            team = rest
+    return team
+
+
 def greedy_match(
     r: FloatArray,
     robot_caps: BoolArray,
@@ -91,10 +112,7 @@ def greedy_match(
         if not free.any():
             break
         ok = free[:, None] & (open_task & completable)[None, :] & helps(robot_caps, missing_caps, missing_payload)
-        scores = np.where(ok, r[:, :m], -np.inf)
-        idle = np.where(free, r[:, m], -np.inf)
-        flat = int(np.argmax(np.concatenate([scores, idle[:, None]], axis=1)))
-        i, j = divmod(flat, m + 1)
+        i, j = _best_pick(r, ok, free)
         free[i] = False
         if j == m:
             waiting[i] = True
@@ -103,15 +121,13 @@ def greedy_match(
         missing_caps[j] &= ~robot_caps[i]
         missing_payload[j] -= robot_payload[i]
         if covered(np.zeros_like(missing_caps[j]), 0.0, missing_caps[j], missing_payload[j]):
-            # Members made redundant by later ones go back to the pool, cheapest first,
-            # so every closed subteam is inclusion-minimal.
-            team = [int(x) for x in np.flatnonzero(member[:, j])]
-            for q in sorted(team, key=lambda q: r[q, j]):
-                rest = [x for x in team if x != q]
-                if rest and covers(robot_caps[rest], robot_payload[rest], task_caps[j], task_payload[j]):
-                    team = rest
-                    member[q, j] = False
-                    free[q] = True
+            team = _drop_redundant([int(x) for x in np.flatnonzero(member[:, j])], r[:, j], robot_caps,
+                                   robot_payload, task_caps[j], float(task_payload[j]))
+            released = member[:, j].copy()
+            released[team] = False
+            free |= released  # redundant members go back to the pool
+            member[:, j] = False
+            member[team, j] = True
             open_task[j] = False
             closed_teams[j] = tuple(team)
     wait = tuple(int(i) for i in np.flatnonzero(waiting))

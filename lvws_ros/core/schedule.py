@@ -60,10 +60,9 @@ class Violation:
         return f"rule {self.rule}: {self.message}"
 
 
-def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[Violation]:
-    """Every violation of the six validity rules of formats.md (empty list: valid)."""
+def _rule1(inst: Instance, s: Schedule) -> list[Violation]:
+    """Rule 1: each task exactly once, robots exist (and subteams are not empty)."""
     v: list[Violation] = []
-    # Rule 1: each task exactly once, robots exist.
     counts: dict[str, int] = {}
     for a in s.assignments:
         counts[a.task] = counts.get(a.task, 0) + 1
@@ -82,6 +81,12 @@ def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[
             v.append(Violation(2, f"task {a.task!r}: empty subteam"))
         if len(set(a.robots)) != len(a.robots):
             v.append(Violation(1, f"task {a.task!r}: a robot is listed twice"))
+    return v
+
+
+def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[Violation]:
+    """Every violation of the six validity rules of formats.md (empty list: valid)."""
+    v = _rule1(inst, s)
     by_task = {a.task: a for a in s.assignments if a.task in inst.task_index}
     for a in by_task.values():
         t = inst.tasks[inst.task_index[a.task]]

@@ -62,6 +62,17 @@ def _with_config(meta: dict[str, Any], cfg: TrainConfig, model: GATN) -> dict[st
     return {**meta, "train_config": {**asdict(cfg), "model": model.cfg.to_dict()}}
 
 
+def _resume(path: str | Path, model: GATN, opt: torch.optim.Optimizer, log: Callable[[str], None]) -> int:
+    """Weights and optimizer state of a training checkpoint; the epoch to go on from."""
+    data = read_checkpoint(path)
+    model.load_state_dict(data["state_dict"])
+    if "optimizer" in data:
+        opt.load_state_dict(data["optimizer"])
+    epoch = int(data.get("epoch", 0))
+    log(f"resumed from {path} at epoch {epoch}")
+    return epoch
+
+
 def train(
     demos: Sequence[Demo],
     cfg: TrainConfig,
@@ -83,14 +94,7 @@ def train(
     if model is None:
         model = GATN(cfg.model)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    start_epoch = 0
-    if resume is not None:
-        data = read_checkpoint(resume)
-        model.load_state_dict(data["state_dict"])
-        if "optimizer" in data:
-            opt.load_state_dict(data["optimizer"])
-        start_epoch = int(data.get("epoch", 0))
-        log(f"resumed from {resume} at epoch {start_epoch}")
+    start_epoch = 0 if resume is None else _resume(resume, model, opt, log)
     # Batches of similar sizes pad less: sort by graph size, shuffle the batches.
     order = sorted(range(len(demos)), key=lambda k: (demos[k].expert.shape, k))
     batches = [order[k:k + cfg.batch_size] for k in range(0, len(order), cfg.batch_size)]

@@ -26,8 +26,10 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from ortools.sat.python import cp_model
 
 from lvws_ros.core.executor import Decision, SimulationResult, State, TaskStatus, schedule_from_state, simulate
@@ -372,18 +374,8 @@ def exact_match(
         carried = sum(int(pay[i]) * a[i][j] for i in range(n))
         model.add(carried >= int(need[j])).only_enforce_if(z[j])  # Eq. 11
         if necessary_only:
-            for i in range(n):
-                reasons = []
-                short = model.new_bool_var(f"short_{i}_{j}")  # payload would fall short without i
-                model.add(carried - int(pay[i]) < int(need[j])).only_enforce_if(short)
-                reasons.append(short)
-                for k in np.flatnonzero(task_caps[j] & robot_caps[i]):
-                    sole = model.new_bool_var(f"sole_{i}_{j}_{k}")  # i is the only holder of k
-                    others = [a[q][j] for q in range(n) if q != i and robot_caps[q, k]]
-                    if others:
-                        model.add(sum(others) == 0).only_enforce_if(sole)
-                    reasons.append(sole)
-                model.add_bool_or(reasons).only_enforce_if(a[i][j])
+            _only_needed_members(model, [a[i][j] for i in range(n)], carried, pay, int(need[j]), robot_caps,
+                                 task_caps[j], f"{j}")
     scaled = np.round(r * 1e6).astype(np.int64)
     model.maximize(sum(int(scaled[i, j]) * a[i][j] for i in range(n) for j in range(m + 1)))
     solver = cp_model.CpSolver()
@@ -404,3 +396,21 @@ def exact_match(
                     teams[j] = (*teams[j], i)
     wait = tuple(waiting)
     return Match(teams, wait, match_reward(r, teams, wait))
+
+
+def _only_needed_members(model: cp_model.CpModel, member: list[cp_model.IntVar], carried: Any,
+                         pay: npt.NDArray[np.int64], need: int, robot_caps: BoolArray, need_caps: BoolArray,
+                         tag: str) -> None:
+    """Each member of the task's subteam is needed: without it the payload falls short,
+    or it is the only member holding some capability the task needs."""
+    for i, x in enumerate(member):
+        short = model.new_bool_var(f"short_{i}_{tag}")  # payload would fall short without i
+        model.add(carried - int(pay[i]) < need).only_enforce_if(short)
+        reasons = [short]
+        for k in np.flatnonzero(need_caps & robot_caps[i]):
+            sole = model.new_bool_var(f"sole_{i}_{tag}_{k}")  # i is the only holder of k
+            others = [member[q] for q in range(len(member)) if q != i and robot_caps[q, k]]
+            if others:
+                model.add(sum(others) == 0).only_enforce_if(sole)
+            reasons.append(sole)
+        model.add_bool_or(reasons).only_enforce_if(x)

@@ -20,15 +20,14 @@ from typing import Any
 
 import rclpy
 from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.errors import AssignmentRejected, LvwsError
 from lvws_ros.ros import convert, topics
+from lvws_ros.ros.entry import node_main
 from lvws_ros.ros.resources import case_study_config
 from lvws_ros.sim.config import ARM_KINDS, load_cell_config
 from lvws_ros.sim.world import CellSim
@@ -221,32 +220,21 @@ class CellSimNode(Node):
         print(json.dumps(summary), flush=True)
 
 
+def run(node: CellSimNode) -> int:
+    """Spin until the world is done, then a moment more so the recorder takes the final state."""
+    while rclpy.ok() and not node.finished:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    if not node.finished:
+        return 1
+    end = time.monotonic() + 0.5
+    while rclpy.ok() and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    return node.exit_code
+
+
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    argparse.ArgumentParser(prog="cell_sim", description=DESCRIPTION).parse_args(remove_ros_args(argv))
-    rclpy.init(args=["cell_sim", *argv])
-    try:
-        node = CellSimNode()
-    except LvwsError as exc:
-        sys.stderr.write(f"cell_sim: {exc}\n")
-        rclpy.try_shutdown()
-        return 2
-    code = 1
-    try:
-        while rclpy.ok() and not node.finished:
-            rclpy.spin_once(node, timeout_sec=0.1)
-        if node.finished:
-            # let the recorder take the final state before we go
-            end = time.monotonic() + 0.5
-            while rclpy.ok() and time.monotonic() < end:
-                rclpy.spin_once(node, timeout_sec=0.05)
-            code = node.exit_code
-    except (KeyboardInterrupt, ExternalShutdownException):
-        code = 130
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    parser = argparse.ArgumentParser(prog="cell_sim", description=DESCRIPTION)
+    return node_main("cell_sim", argv, parser, lambda _args: CellSimNode(), run, interrupted=130)
 
 
 if __name__ == "__main__":

@@ -15,15 +15,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.signals import SignalHandlerOptions
-from rclpy.utilities import remove_ros_args
 
-from lvws_ros.errors import LvwsError
 from lvws_ros.ros.bag import open_writer, qos_to_bag, typestore
+from lvws_ros.ros.entry import node_main
 from lvws_ros.ros.topics import TOPICS, message_class
 
 RECORDER_DEPTH = 10000  # history per subscription: bursts wait here instead of being overwritten
@@ -47,6 +44,7 @@ def recording_qos(qos: QoSProfile) -> QoSProfile:
 class Recorder(Node):
     def __init__(self, output: Path) -> None:
         super().__init__("recorder")
+        self.output = output
         self.writer = open_writer(output)
         self.count = 0
         self.closed = False
@@ -63,34 +61,23 @@ class Recorder(Node):
                 self.count += 1
         return write
 
-    def close(self) -> None:
+    def destroy_node(self) -> None:
+        """Close the bag first: it is complete and readable whatever stopped us."""
         if not self.closed:
             self.closed = True
             self.writer.close()
+            print(f"recorded {self.count} messages to {self.output}", flush=True)
+        super().destroy_node()
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    args = build_parser().parse_args(remove_ros_args(argv))
-    output = Path(args.output) if args.output else Path("bags") / time.strftime("run-%Y%m%d-%H%M%S")
-    rclpy.init(args=["recorder", *argv], signal_handler_options=SignalHandlerOptions.ALL)
-    try:
+    def make(args: argparse.Namespace) -> Recorder:
+        output = Path(args.output) if args.output else Path("bags") / time.strftime("run-%Y%m%d-%H%M%S")
         node = Recorder(output)
-    except LvwsError as exc:
-        sys.stderr.write(f"recorder: {exc}\n")
-        rclpy.try_shutdown()
-        return 2
-    print(f"recording to {output}", flush=True)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.close()  # the bag is complete and readable whatever stopped us
-        print(f"recorded {node.count} messages to {output}", flush=True)
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+        print(f"recording to {output}", flush=True)
+        return node
+
+    return node_main("recorder", argv, build_parser(), make, signal_handler_options=SignalHandlerOptions.ALL)
 
 
 if __name__ == "__main__":

@@ -17,18 +17,16 @@ import argparse
 import sys
 import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.utilities import remove_ros_args
 
 from lvws_ros.core.online import OnlineScheduler
 from lvws_ros.errors import LvwsError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES, make_policy
 from lvws_ros.ros import convert, topics
+from lvws_ros.ros.entry import node_main
 
 DESCRIPTION = (
     "LVWS scheduler node: subscribes to /lvws/team_state and /lvws/task_graph, "
@@ -122,24 +120,8 @@ class SchedulerNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    argparse.ArgumentParser(prog="scheduler", description=DESCRIPTION).parse_args(remove_ros_args(argv))
-    rclpy.init(args=["scheduler", *argv])
-    try:
-        node = SchedulerNode()
-    except LvwsError as exc:
-        sys.stderr.write(f"scheduler: {exc}\n")
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
-
+    parser = argparse.ArgumentParser(prog="scheduler", description=DESCRIPTION)
+    return node_main("scheduler", argv, parser, lambda _args: SchedulerNode())
 
 
 if __name__ == "__main__":
