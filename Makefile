@@ -15,7 +15,7 @@ EXES := lvws scheduler cell_sim recorder
 export AMENT_PREFIX_PATH := $(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: env msgs test lint demo bench clean distclean
+.PHONY: env msgs test lint demo bench fuzz clean distclean
 
 env: $(VENV)/.stamp-pkg
 
@@ -59,6 +59,10 @@ test: env lint
 # LVWS model) + recorder; the bag lands in bags/, Gantt PNG, GIF and logs in out/.
 demo: env
 	$(PY) -m lvws_ros.cli launch --bag-dir bags --out-dir out
+
+# Property-based fuzzing of the file formats: 10^4 examples per property, counts printed.
+fuzz: env
+	LVWS_FUZZ_EXAMPLES=10000 $(PY) -m pytest -q -s -p no:cacheprovider test/core/test_fuzz_formats.py
 
 # Benchmarks print figures (with the machine); they assert nothing and are not in `make test`.
 bench: env

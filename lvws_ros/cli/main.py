@@ -45,8 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
-        parser.print_help()
-        return 0
+        parser.print_usage(sys.stderr)
+        print("lvws: error: a COMMAND is needed (lvws --help lists them)", file=sys.stderr)
+        return 2
     try:
         return int(args.func(args))
     except (LvwsError, OSError) as exc:

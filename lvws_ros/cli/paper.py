@@ -21,6 +21,7 @@ from typing import Any
 from lvws_ros.cli.evaluation import expert_records
 from lvws_ros.core.datasets import DATASETS, dataset_instance
 from lvws_ros.core.executor import Policy
+from lvws_ros.core.formats import instance_key
 from lvws_ros.core.metrics import ExpertRecord, RunRecord, run_policy, suboptimality
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
@@ -53,8 +54,8 @@ def run_column(instances: Sequence[Instance], policies: dict[str, Policy], cache
                workers: int, progress: bool) -> Column:
     from tqdm import tqdm
 
-    names = {inst.name for inst in instances}
-    experts = {k: v for k, v in expert_records(instances, cache, time_limit, workers, progress).items() if k in names}
+    keys = {instance_key(inst) for inst in instances}
+    experts = {k: v for k, v in expert_records(instances, cache, time_limit, workers, progress).items() if k in keys}
     runs = {name: [run_policy(inst, pol) for inst in tqdm(instances, desc=name, disable=not progress, unit="inst")]
             for name, pol in policies.items()}
     return Column(runs, experts)
@@ -63,8 +64,8 @@ def run_column(instances: Sequence[Instance], policies: dict[str, Policy], cache
 def mean_suboptimality(col: Column, policy: str) -> tuple[float, int, int]:
     """(mean %, instances counted, invalid runs); counted: valid runs with a proven optimum."""
     rows = col.runs[policy]
-    subs = [suboptimality(r.makespan, col.experts[r.instance].makespan) for r in rows
-            if r.valid and col.experts[r.instance].status == "optimal"]
+    subs = [suboptimality(r.makespan, col.experts[r.key].makespan) for r in rows
+            if r.valid and col.experts[r.key].status == "optimal"]
     return (statistics.fmean(subs) if subs else math.nan), len(subs), sum(not r.valid for r in rows)
 
 

@@ -8,7 +8,9 @@ schedule obeys the six validity rules is :func:`lvws_ros.core.schedule.check_sch
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
@@ -22,6 +24,7 @@ __all__ = [
     "SCHEDULE_FORMAT",
     "dumps",
     "instance_from_dict",
+    "instance_key",
     "instance_to_dict",
     "load_instance",
     "load_schedule",
@@ -40,23 +43,73 @@ SCHEDULE_FORMAT = "lvws-schedule/1"
 
 
 def read_json(path: str | Path, what: str, error: type[LvwsError] = InstanceError) -> Any:
-    """Parse a JSON file; a missing or malformed file is an ``error`` naming it."""
+    """Parse a JSON file strictly; anything unreadable is an ``error`` naming the file.
+
+    Rejected: invalid UTF-8, NaN/Infinity, numbers that overflow a float (``1e400``),
+    integers of more than MAX_INT_DIGITS digits, nesting deeper than MAX_DEPTH.
+    """
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        raw = p.read_bytes()
     except OSError as exc:
         raise error(f"{p}: cannot read {what}: {exc.strerror or exc}") from exc
     try:
-        return json.loads(text, parse_constant=_reject_constant)
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{p}: {what} is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    try:
+        data = json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float, parse_int=_bounded_int)
     except json.JSONDecodeError as exc:
-        raise error(f"{p}: malformed JSON {what}: {exc}") from exc
-    except LvwsError as exc:
+        raise error(f"{p}: malformed JSON {what}: {exc}") from None
+    except RecursionError:
+        raise error(f"{p}: malformed JSON {what}: nested too deeply") from None
+    except _NumberError as exc:
         raise error(f"{p}: {exc}") from None
+    if _depth(data) > MAX_DEPTH:
+        raise error(f"{p}: {what} is nested deeper than {MAX_DEPTH} levels")
+    return data
+
+
+MAX_DEPTH = 32  # the formats need 4 levels
+MAX_INT_DIGITS = 30
+
+
+class _NumberError(ValueError):
+    pass
 
 
 def _reject_constant(name: str) -> float:
     # json accepts NaN/Infinity by default; the format does not.
-    raise InstanceError(f"non-finite number {name} is not allowed")
+    raise _NumberError(f"non-finite number {name} is not allowed")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise _NumberError(f"number {text[:40]} is out of range (not a finite float)")
+    return value
+
+
+def _bounded_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_INT_DIGITS:
+        raise _NumberError(f"integer of {digits} digits is out of range")
+    return int(text)
+
+
+def _depth(data: Any) -> int:
+    """Nesting depth, without recursion (a hostile file may nest a thousand levels)."""
+    deepest, stack = 0, [(data, 1)]
+    while stack:
+        item, d = stack.pop()
+        deepest = max(deepest, d)
+        if d > MAX_DEPTH:
+            break
+        if isinstance(item, dict):
+            stack += [(v, d + 1) for v in item.values()]
+        elif isinstance(item, list):
+            stack += [(v, d + 1) for v in item]
+    return deepest
 
 
 def dumps(data: Mapping[str, Any]) -> str:
@@ -98,55 +151,89 @@ def _require(obj: Mapping[str, Any], key: str, where: str) -> Any:
     return obj[key]
 
 
-def _as_list(value: Any, where: str) -> list[Any]:
+def _type(value: Any) -> str:
+    return {dict: "an object", list: "a list", str: "a string", bool: "a boolean", type(None): "null",
+            int: "a number", float: "a number"}.get(type(value), type(value).__name__)
+
+
+def _list(value: Any, where: str) -> list[Any]:
     if not isinstance(value, list):
-        raise InstanceError(f"{where} must be a list, got {type(value).__name__}")
+        raise InstanceError(f"{where}: expected a list, got {_type(value)}")
+    return value
+
+
+def _object(value: Any, where: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise InstanceError(f"{where}: expected an object, got {_type(value)}")
+    return value
+
+
+def _string(value: Any, where: str, what: str = "a string") -> str:
+    if not isinstance(value, str):
+        raise InstanceError(f"{where}: expected {what}, got {_type(value)}")
+    return value
+
+
+def _bits(value: Any, where: str) -> tuple[int, ...]:
+    for n, v in enumerate(_list(value, where)):
+        if isinstance(v, bool) or v not in (0, 1):
+            raise InstanceError(f"{where}[{n}]: expected 0 or 1, got {_type(v) if not isinstance(v, int) else v}")
+    return tuple(value)
+
+
+def _num(value: Any, where: str) -> float | int:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InstanceError(f"{where}: expected a number, got {_type(value)}")
     return value
 
 
 def _robot(r: Any, where: str) -> Robot:
-    if not isinstance(r, dict):
-        raise InstanceError(f"{where} must be an object")
-    return Robot(
-        id=_require(r, "id", where),
-        capabilities=tuple(_as_list(_require(r, "capabilities", where), f"{where}.capabilities")),
-        payload=_require(r, "payload", where),
-        extra={k: v for k, v in r.items() if k not in {"id", "capabilities", "payload"}},
-    )
+    r = _object(r, where)
+    rid = _string(_require(r, "id", where), f"{where}.id", "a robot id")
+    try:
+        return Robot(
+            id=rid,
+            capabilities=_bits(_require(r, "capabilities", where), f"{where}.capabilities"),
+            payload=_num(_require(r, "payload", where), f"{where}.payload"),
+            extra={k: v for k, v in r.items() if k not in {"id", "capabilities", "payload"}},
+        )
+    except InstanceError as exc:
+        raise InstanceError(f"{exc} (robot {rid[:40]!r})") from None
 
 
 _TASK_KEYS = {"id", "capabilities", "payload", "duration", "after"}
 
 
 def _task(t: Any, where: str) -> Task:
-    if not isinstance(t, dict):
-        raise InstanceError(f"{where} must be an object")
-    return Task(
-        id=_require(t, "id", where),
-        capabilities=tuple(_as_list(_require(t, "capabilities", where), f"{where}.capabilities")),
-        payload=_require(t, "payload", where),
-        duration=_require(t, "duration", where),
-        after=tuple(_as_list(t.get("after", []), f"{where}.after")),
-        extra={k: v for k, v in t.items() if k not in _TASK_KEYS},
-    )
+    t = _object(t, where)
+    tid = _string(_require(t, "id", where), f"{where}.id", "a task id")
+    try:
+        after = _list(t.get("after", []), f"{where}.after")
+        return Task(
+            id=tid,
+            capabilities=_bits(_require(t, "capabilities", where), f"{where}.capabilities"),
+            payload=_num(_require(t, "payload", where), f"{where}.payload"),
+            duration=_num(_require(t, "duration", where), f"{where}.duration"),
+            after=tuple(_string(p, f"{where}.after[{n}]", "a task id") for n, p in enumerate(after)),
+            extra={k: v for k, v in t.items() if k not in _TASK_KEYS},
+        )
+    except InstanceError as exc:
+        raise InstanceError(f"{exc} (task {tid[:40]!r})") from None
 
 
 def instance_from_dict(data: Any) -> Instance:
-    """Build a validated Instance from parsed ``lvws-instance/1`` JSON."""
-    if not isinstance(data, dict):
-        raise InstanceError("instance: the top level must be a JSON object")
+    """Build a validated Instance from parsed ``lvws-instance/1`` JSON; an
+    InstanceError names the item (``tasks[3].after[0]: expected a task id, got a list``)."""
+    data = _object(data, "instance")
     fmt = data.get("format")
     if fmt != INSTANCE_FORMAT:
-        raise InstanceError(f"format: expected {INSTANCE_FORMAT!r}, got {fmt!r}")
-    name = data.get("name", "")
-    if not isinstance(name, str):
-        raise InstanceError(f"name must be a string, got {name!r}")
-    caps = _as_list(_require(data, "capabilities", "instance"), "capabilities")
-    if not all(isinstance(c, str) for c in caps):
-        raise InstanceError("capabilities must be a list of names")
-    robots = [_robot(r, f"robots[{n}]") for n, r in enumerate(_as_list(_require(data, "robots", "instance"), "robots"))]
-    tasks = [_task(t, f"tasks[{n}]") for n, t in enumerate(_as_list(_require(data, "tasks", "instance"), "tasks"))]
-    return Instance(name=name, capabilities=tuple(caps), robots=tuple(robots), tasks=tuple(tasks))
+        raise InstanceError(f"format: expected {INSTANCE_FORMAT!r}, got {str(fmt)[:40]!r}")
+    name = _string(data.get("name", ""), "name")
+    caps = tuple(_string(c, f"capabilities[{n}]", "a capability name")
+                 for n, c in enumerate(_list(_require(data, "capabilities", "instance"), "capabilities")))
+    robots = [_robot(r, f"robots[{n}]") for n, r in enumerate(_list(_require(data, "robots", "instance"), "robots"))]
+    tasks = [_task(t, f"tasks[{n}]") for n, t in enumerate(_list(_require(data, "tasks", "instance"), "tasks"))]
+    return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks))
 
 
 def instance_to_dict(inst: Instance) -> dict[str, Any]:
@@ -170,6 +257,14 @@ def instance_to_dict(inst: Instance) -> dict[str, Any]:
             for t in inst.tasks
         ],
     }
+
+
+def instance_key(inst: Instance) -> str:
+    """A hash of the instance's content (its name left out): caches are keyed by what an
+    instance is, so two different instances never share a record, whatever their names."""
+    data = instance_to_dict(inst)
+    data.pop("name")
+    return hashlib.sha256(dumps(data).encode()).hexdigest()[:32]
 
 
 def load_instance(path: str | Path) -> Instance:
@@ -199,48 +294,62 @@ def schedule_to_dict(s: Schedule) -> dict[str, Any]:
     }
 
 
-def _number(value: Any, where: str) -> float:
+def _sched_number(value: Any, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ScheduleError(f"{where} must be a number")
+        raise ScheduleError(f"{where}: expected a number, got {_type(value)}")
+    if isinstance(value, int) and abs(value) > 1e300:
+        raise ScheduleError(f"{where}: number out of range")
     return float(value)
 
 
+def _sched_string(value: Any, where: str) -> str:
+    if not isinstance(value, str):
+        raise ScheduleError(f"{where}: expected a string, got {_type(value)}")
+    return value
+
+
 def _assignment(a: Any, where: str) -> Assignment:
-    if not isinstance(a, dict) or not {"task", "robots", "start", "end"} <= a.keys():
-        raise ScheduleError(f"{where}: needs task, robots, start and end")
+    if not isinstance(a, dict):
+        raise ScheduleError(f"{where}: expected an object, got {_type(a)}")
+    missing = [k for k in ("task", "robots", "start", "end") if k not in a]
+    if missing:
+        raise ScheduleError(f"{where}: missing key(s) {missing} (needs task, robots, start and end)")
     if not isinstance(a["robots"], list):
-        raise ScheduleError(f"{where}.robots must be a list")
-    return Assignment(str(a["task"]), tuple(str(r) for r in a["robots"]), _number(a["start"], f"{where}.start"),
-                      _number(a["end"], f"{where}.end"))
+        raise ScheduleError(f"{where}.robots: expected a list, got {_type(a['robots'])}")
+    return Assignment(_sched_string(a["task"], f"{where}.task"),
+                      tuple(_sched_string(r, f"{where}.robots[{n}]") for n, r in enumerate(a["robots"])),
+                      _sched_number(a["start"], f"{where}.start"), _sched_number(a["end"], f"{where}.end"))
 
 
 _SCHEDULE_KEYS = {"format", "instance", "policy", "makespan", "assignments", "decisions", "compute_seconds"}
 
 
 def schedule_from_dict(data: Any) -> Schedule:
-    """Parse ``lvws-schedule/1``; structural problems raise ScheduleError.
+    """Parse ``lvws-schedule/1``; structural problems (types, missing keys, null where a
+    number belongs) raise ScheduleError naming the item.
 
     Semantic problems (overlaps, coverage, ...) are left to
     :func:`~lvws_ros.core.schedule.check_schedule`, so that ``lvws check`` can list
     every violated rule.
     """
     if not isinstance(data, dict):
-        raise ScheduleError("schedule: the top level must be a JSON object")
+        raise ScheduleError(f"schedule: expected an object at the top level, got {_type(data)}")
     if data.get("format") != SCHEDULE_FORMAT:
-        raise ScheduleError(f"format: expected {SCHEDULE_FORMAT!r}, got {data.get('format')!r}")
+        raise ScheduleError(f"format: expected {SCHEDULE_FORMAT!r}, got {str(data.get('format'))[:40]!r}")
     for key in ("instance", "policy", "makespan", "assignments"):
         if key not in data:
             raise ScheduleError(f"schedule: missing key {key!r}")
     if not isinstance(data["assignments"], list):
-        raise ScheduleError("schedule: assignments must be a list")
+        raise ScheduleError(f"assignments: expected a list, got {_type(data['assignments'])}")
     out = [_assignment(a, f"assignments[{n}]") for n, a in enumerate(data["assignments"])]
+    decisions = _sched_number(data.get("decisions", 0), "decisions")
     return Schedule(
-        instance=str(data["instance"]),
-        policy=str(data["policy"]),
+        instance=_sched_string(data["instance"], "instance"),
+        policy=_sched_string(data["policy"], "policy"),
         assignments=out,
-        makespan=_number(data["makespan"], "schedule: makespan"),
-        decisions=int(data.get("decisions", 0)),
-        compute_seconds=float(data.get("compute_seconds", 0.0)),
+        makespan=_sched_number(data["makespan"], "makespan"),
+        decisions=int(decisions) if math.isfinite(decisions) else 0,
+        compute_seconds=_sched_number(data.get("compute_seconds", 0.0), "compute_seconds"),
         extra={k: v for k, v in data.items() if k not in _SCHEDULE_KEYS},
     )
 

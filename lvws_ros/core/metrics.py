@@ -11,6 +11,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from lvws_ros.core.executor import Policy, simulate, voluntary_waits
+from lvws_ros.core.formats import instance_key
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import PolicyError
@@ -44,6 +45,7 @@ class RunRecord:
     compute_seconds: float
     error: str = ""
     voluntary_steps: int = 0  # decision steps where a free robot waits though it could start a ready task
+    key: str = ""  # content hash of the instance (formats.instance_key): what expert records are keyed by
 
 
 @dataclass(frozen=True)
@@ -63,22 +65,23 @@ def run_policy(inst: Instance, policy: Policy) -> RunRecord:
     try:
         res = simulate(inst, policy, record_states=True)
     except PolicyError as exc:
-        return RunRecord(inst.name, policy.name, False, math.nan, 0, 0.0, str(exc))
+        return RunRecord(inst.name, policy.name, False, math.nan, 0, 0.0, str(exc), key=instance_key(inst))
     problems = check_schedule(inst, res.schedule)
     voluntary = sum(bool(voluntary_waits(s.state, s.decision)) for s in res.steps if s.state is not None)
     return RunRecord(inst.name, policy.name, not problems, res.schedule.makespan, res.schedule.decisions,
-                     res.schedule.compute_seconds, "; ".join(map(str, problems)), voluntary)
+                     res.schedule.compute_seconds, "; ".join(map(str, problems)), voluntary, instance_key(inst))
 
 
 def summarize(runs: Iterable[RunRecord], experts: dict[str, ExpertRecord]) -> list[PolicySummary]:
+    """Per policy; ``experts`` is keyed by :func:`~lvws_ros.core.formats.instance_key`."""
     by_policy: dict[str, list[RunRecord]] = {}
     for r in runs:
         by_policy.setdefault(r.policy, []).append(r)
     out = []
     for policy, rows in by_policy.items():
         valid = [r for r in rows if r.valid]
-        proven = [r for r in valid if r.instance in experts and experts[r.instance].status == "optimal"]
-        subs = [suboptimality(r.makespan, experts[r.instance].makespan) for r in proven]
+        proven = [r for r in valid if r.key in experts and experts[r.key].status == "optimal"]
+        subs = [suboptimality(r.makespan, experts[r.key].makespan) for r in proven]
         decisions = sum(r.decisions for r in valid)
         out.append(PolicySummary(
             policy=policy,

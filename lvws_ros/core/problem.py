@@ -23,6 +23,10 @@ import numpy.typing as npt
 from lvws_ros.core.subteams import BoolArray, FloatArray, shortfall
 from lvws_ros.errors import InstanceError
 
+# Durations and payloads are at most this (formats.md, "Limits"): far above any real cell,
+# and low enough that sums and products of them never overflow or lose all precision.
+MAX_VALUE = 1e9
+
 # A capability named "@<site>" is a location: robots there hold it, tasks there need it.
 # The matching enforces it like any capability; the network's node features leave it out.
 SITE_PREFIX = "@"
@@ -166,26 +170,38 @@ def _topological_order(inst: Instance) -> tuple[int, ...]:
 
 
 def _check_number(value: Any, what: str, *, positive: bool) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    """A finite number in [0, MAX_VALUE] (> 0 when ``positive``), whatever type it came as."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise InstanceError(f"{what} must be a number, got {value!r}")
-    if not math.isfinite(value):
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
         raise InstanceError(f"{what} must be finite, got {value!r}")
+    if value > MAX_VALUE:  # compared before any float conversion: a huge int stays exact
+        raise InstanceError(f"{what} must be at most {MAX_VALUE:g}, got {_short(value)}")
     if positive and value <= 0:
         raise InstanceError(f"{what} must be > 0, got {value!r}")
     if not positive and value < 0:
         raise InstanceError(f"{what} must be >= 0, got {value!r}")
 
 
-def _check_vector(vec: Sequence[Any], k: int, what: str) -> None:
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:20]}...({len(text)} characters)"
+
+
+def _check_vector(vec: Any, k: int, what: str) -> None:
+    if not isinstance(vec, (tuple, list)):
+        raise InstanceError(f"{what} must be a list of 0/1, got {_short(vec)}")
     if len(vec) != k:
         raise InstanceError(f"{what} has {len(vec)} entries, expected {k} (one per capability)")
-    if any(isinstance(v, bool) or v not in (0, 1) for v in vec):
-        raise InstanceError(f"{what} must hold only 0 or 1, got {list(vec)}")
+    if any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v not in (0, 1) for v in vec):
+        raise InstanceError(f"{what} must hold only 0 or 1, got {_short(list(vec))}")
 
 
 def validate_instance(inst: Instance) -> None:
     """Raise InstanceError naming every kind of problem of section 'Problem instance'."""
     k = len(inst.capabilities)
+    if not all(isinstance(c, str) and c for c in inst.capabilities):
+        raise InstanceError(f"capabilities: names must be non-empty strings, got {_short(list(inst.capabilities))}")
     if k < 1:
         raise InstanceError("capabilities: at least one capability name is needed")
     if len(set(inst.capabilities)) != k:
@@ -204,6 +220,8 @@ def validate_instance(inst: Instance) -> None:
             raise InstanceError(f"task {t.id!r} capabilities: needs at least one capability")
         _check_number(t.payload, f"task {t.id!r} payload", positive=False)
         _check_number(t.duration, f"task {t.id!r} duration", positive=True)
+        if not isinstance(t.after, (tuple, list)) or not all(isinstance(p, str) for p in t.after):
+            raise InstanceError(f"task {t.id!r} after: expected a list of task ids, got {_short(t.after)}")
         unknown = [p for p in t.after if p not in task_ids]
         if unknown:
             raise InstanceError(f"task {t.id!r} after: unknown task id(s) {unknown}")

@@ -5,6 +5,7 @@ Reading and writing schedule files is :mod:`lvws_ros.core.formats`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
@@ -100,29 +101,34 @@ def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[
             v.append(Violation(2, f"task {t.id!r}: subteam {list(a.robots)} lacks capability {names}"))
         if short > 0:
             v.append(Violation(2, f"task {t.id!r}: subteam payload {carried:g} < needed {t.payload:g}"))
-        # Rule 3: duration and start.
-        if abs((a.end - a.start) - t.duration) > tol:
+        # Rule 3: duration and start. Every comparison is written "violated unless it holds",
+        # so that NaN (for which every comparison is False) is a violation, never a pass.
+        if not (math.isfinite(a.start) and math.isfinite(a.end)):
+            v.append(Violation(3, f"task {t.id!r}: start {a.start!r} and end {a.end!r} must be finite numbers"))
+            continue
+        if not abs((a.end - a.start) - t.duration) <= tol:
             v.append(Violation(3, f"task {t.id!r}: end - start = {a.end - a.start:g}, duration is {t.duration:g}"))
-        if a.start < -tol:
+        if not a.start >= -tol:
             v.append(Violation(3, f"task {t.id!r}: starts at {a.start:g} < 0"))
         # Rule 4: prerequisites finished.
         for p in t.after:
             pa = by_task.get(p)
-            if pa is not None and a.start < pa.end - tol:
+            if pa is not None and not a.start >= pa.end - tol:
                 v.append(Violation(4, f"task {t.id!r} starts at {a.start:g} before prerequisite {p!r} ends at {pa.end:g}"))
-    # Rule 5: no robot in two overlapping assignments.
+    # Rule 5: no robot in two overlapping assignments (non-finite ones are rule 3 violations).
     per_robot: dict[str, list[Assignment]] = {}
     for a in s.assignments:
-        for r in set(a.robots):
-            per_robot.setdefault(r, []).append(a)
+        if math.isfinite(a.start) and math.isfinite(a.end):
+            for r in set(a.robots):
+                per_robot.setdefault(r, []).append(a)
     for r, items in sorted(per_robot.items()):
         items.sort(key=lambda a: (a.start, a.end))
         for x, y in pairwise(items):
-            if y.start < x.end - tol:
+            if not y.start >= x.end - tol:
                 v.append(Violation(5, f"robot {r!r} is in {x.task!r} [{x.start:g}, {x.end:g}) "
                                       f"and {y.task!r} [{y.start:g}, {y.end:g}) at once"))
     # Rule 6: makespan is the largest end.
     latest = max((a.end for a in s.assignments), default=0.0)
-    if abs(s.makespan - latest) > tol:
+    if not abs(s.makespan - latest) <= tol:
         v.append(Violation(6, f"makespan {s.makespan:g} != largest end {latest:g}"))
     return v

@@ -26,7 +26,7 @@ parallel processes, or on a Ray cluster when given its address.
 
 from __future__ import annotations
 
-import pickle
+import json
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -38,7 +38,8 @@ from lvws_ros.core.executor import Policy, State, simulate
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Schedule
 from lvws_ros.core.subteams import TOLERANCE
-from lvws_ros.learning.features import encode_state
+from lvws_ros.errors import ModelError
+from lvws_ros.learning.features import GraphFeatures, encode_state
 from lvws_ros.learning.loss import Demo, feasibility_mask
 from lvws_ros.policies.exact import ExactPolicy, solve_exact
 
@@ -162,16 +163,48 @@ def label_instances(
     return [d for demos in results for d in demos]
 
 
+DEMOS_FORMAT = "lvws-demos/2"
+_ARRAYS = ("robots", "tasks", "task_adjacency", "pairs", "expert", "mask")
+
+
+def _parts(d: Demo) -> tuple[np.ndarray, ...]:
+    f = d.features
+    return f.robots, f.tasks, f.task_adjacency, f.pairs, d.expert, d.mask
+
+
 def save_demos(demos: Sequence[Demo], path: str | Path, meta: dict[str, Any] | None = None) -> None:
+    """Write demonstrations as a data-only ``.npz`` (no pickle): each array kind is
+    concatenated over the demonstrations along its first axis, with the row counts."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    with p.open("wb") as f:
-        pickle.dump({"format": "lvws-demos/1", "meta": meta or {}, "demos": list(demos)}, f)
+    arrays: dict[str, Any] = {}
+    for k, name in enumerate(_ARRAYS):
+        parts = [_parts(d)[k] for d in demos]
+        arrays[name] = np.concatenate(parts) if parts else np.zeros((0,))
+        arrays[f"{name}_rows"] = np.array([len(x) for x in parts], dtype=np.int64)
+        arrays[f"{name}_shape"] = np.array([x.shape[1:] for x in parts], dtype=np.int64).reshape(len(parts), -1)
+    header = json.dumps({"format": DEMOS_FORMAT, "meta": meta or {}, "count": len(demos)})
+    tmp = p.with_name(p.name + ".tmp.npz")
+    np.savez_compressed(tmp, header=np.array(header), **arrays)
+    tmp.replace(p)
 
 
 def load_demos(path: str | Path) -> tuple[list[Demo], dict[str, Any]]:
-    with Path(path).open("rb") as f:
-        data = pickle.load(f)
-    if not isinstance(data, dict) or data.get("format") != "lvws-demos/1":
-        raise ValueError(f"{path}: not an lvws-demos/1 file")
-    return data["demos"], data["meta"]
+    """Read :func:`save_demos` files with ``allow_pickle=False``: a file never runs code."""
+    p = Path(path)
+    try:
+        with np.load(p, allow_pickle=False) as data:
+            header = json.loads(str(data["header"]))
+            if header.get("format") != DEMOS_FORMAT:
+                raise ModelError(f"{p}: not an {DEMOS_FORMAT} file")
+            split = {}
+            for name in _ARRAYS:
+                flat, rows, shapes = data[name], data[f"{name}_rows"], data[f"{name}_shape"]
+                ends = np.cumsum(rows)
+                split[name] = [flat[e - r:e].reshape((r, *shape)) for e, r, shape in zip(ends, rows, shapes,
+                                                                                          strict=True)]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ModelError(f"{p}: not a readable {DEMOS_FORMAT} file ({type(exc).__name__}: {exc})") from None
+    demos = [Demo(GraphFeatures(split["robots"][k], split["tasks"][k], split["task_adjacency"][k], split["pairs"][k]),
+                  split["expert"][k], split["mask"][k]) for k in range(header["count"])]
+    return demos, header["meta"]

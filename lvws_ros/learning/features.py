@@ -36,6 +36,22 @@ TAIL_SCALE = 50.0
 
 F32 = npt.NDArray[np.float32]
 
+# The dense network holds (M+1)^2 attention weights per head and layer: about
+# DENSE_BYTES_PER_PAIR bytes per task pair at a decision step. Past DENSE_MEMORY_LIMIT
+# the learned policies refuse the instance with a PolicyError (the CLI and the node
+# then say so) instead of running out of memory: about 14,000 tasks.
+DENSE_BYTES_PER_PAIR = 24
+DENSE_MEMORY_LIMIT = 4 * 2**30
+
+
+def check_size(inst: Instance) -> None:
+    """PolicyError when the dense network would need more than DENSE_MEMORY_LIMIT."""
+    need = DENSE_BYTES_PER_PAIR * ((inst.num_tasks + 1) ** 2 + inst.num_robots ** 2
+                                   + inst.num_robots * (inst.num_tasks + 1) * PAIR_FEATURES)
+    if need > DENSE_MEMORY_LIMIT:
+        raise PolicyError(f"{inst.num_robots} robots x {inst.num_tasks} tasks need about {need / 2**30:.0f} GiB in the "
+                          f"learned model (limit {DENSE_MEMORY_LIMIT / 2**30:.0f} GiB); use a baseline policy (grp)")
+
 
 @dataclass(frozen=True)
 class GraphFeatures:

@@ -24,11 +24,17 @@ from lvws_ros.core.matching import greedy_match
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import covers
 from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint
-from lvws_ros.learning.features import encode_state, pair_features
+from lvws_ros.learning.features import check_size, encode_state, pair_features
 from lvws_ros.learning.gatn import GATN, reward_matrix
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 NO_VOLUNTARY_WAIT = -1e6  # idle bias that leaves waiting only to robots with nothing to do
+
+
+def _idle_last(sub: np.ndarray) -> None:
+    """Put the idle column below every task reward, whatever their scale: a robot then
+    waits only when no ready task needs it (NO_VOLUNTARY_WAIT)."""
+    sub[:, -1] = float(sub[:, :-1].min(initial=0.0)) - 1.0
 
 
 class LVWSPolicy:
@@ -45,6 +51,7 @@ class LVWSPolicy:
 
     def reset(self, instance: Instance) -> None:
         if self._pairs is None or self._pairs[0] is not instance:  # rollouts reset once per simulation
+            check_size(instance)
             self._pairs = (instance, pair_features(instance))
 
     def rewards(self, state: State) -> np.ndarray:
@@ -60,11 +67,15 @@ class LVWSPolicy:
         if not free or not ready:
             return Decision((), tuple(free))
         sub = r[np.ix_(free, [*ready, inst.num_tasks])]
-        sub[:, -1] += self.idle_bias if idle_bias is None else idle_bias
+        bias = self.idle_bias if idle_bias is None else idle_bias
+        if bias <= NO_VOLUNTARY_WAIT:
+            _idle_last(sub)
+        else:
+            sub[:, -1] += bias
         args = (inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[ready], inst.task_payload[ready])
         match = greedy_match(sub, *args)
         if not match.teams and not (state.task_status == TaskStatus.ASSIGNED).any():
-            sub[:, -1] = NO_VOLUNTARY_WAIT  # waiting now would stall: take the best task instead
+            _idle_last(sub)  # waiting now would stall: take the best task instead
             match = greedy_match(sub, *args)
         assignments = tuple((ready[j], tuple(free[i] for i in team)) for j, team in sorted(match.teams.items()))
         return Decision(assignments, tuple(free[i] for i in match.waiting))
@@ -85,7 +96,7 @@ class DBGMPolicy:
         self.model = model.eval()
 
     def reset(self, instance: Instance) -> None:
-        pass
+        check_size(instance)
 
     def decide(self, state: State) -> Decision:
         inst = state.instance
@@ -108,7 +119,8 @@ class DBGMPolicy:
         rest_t = [j for j in ready if j not in used_t and j not in single]  # need a subteam
         if rest_r and rest_t:
             sub = r[np.ix_(rest_r, rest_t)]
-            sub = np.concatenate([sub, np.full((len(rest_r), 1), NO_VOLUNTARY_WAIT)], axis=1)  # no idle task
+            sub = np.concatenate([sub, np.zeros((len(rest_r), 1))], axis=1)
+            _idle_last(sub)  # no idle task
             match = greedy_match(sub, inst.robot_caps[rest_r], inst.robot_payload[rest_r],
                                  inst.task_caps[rest_t], inst.task_payload[rest_t])
             out += [(rest_t[j], tuple(rest_r[i] for i in team)) for j, team in match.teams.items()]

@@ -204,7 +204,7 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
     train_set, val_set = split_training_instances(cfg)
     log(f"{len(train_set)} training and {len(val_set)} validation instances from the training splits of "
         f"datasets {cfg.datasets} (data seed {cfg.data_seed}, training seed {tcfg.seed})")
-    cache = Path(cache_dir) / f"demos-{'-'.join(cfg.datasets)}-s{cfg.data_seed}-n{len(train_set)}.pkl" if cache_dir else None
+    cache = Path(cache_dir) / f"demos-{'-'.join(cfg.datasets)}-s{cfg.data_seed}-n{len(train_set)}.npz" if cache_dir else None
     if cache is not None and cache.is_file():
         demos, _ = load_demos(cache)
         log(f"expert demonstrations from {cache}: {len(demos)} states")

@@ -82,3 +82,38 @@ def test_evaluate_paper_writes_both_tables_and_the_waiting_section(tmp_path):
     assert (tmp_path / "paper-cache" / "expert-I-s0.json").is_file()
     bad = lvws("evaluate", "--paper", "--policies", "exact", "--out-dir", tmp_path, check=False)
     assert bad.returncode == 2 and "compare" in bad.stderr
+
+
+def test_bare_lvws_prints_usage_and_exits_2():
+    res = lvws(check=False)
+    assert res.returncode == 2 and "usage: lvws" in res.stderr and "Traceback" not in res.stderr
+
+
+@pytest.mark.parametrize("text", ['{"format": "lvws-schedule/1", "instance": "x", "policy": "p", "makespan": 1e400, '
+                                  '"assignments": []}',
+                                  '{"format": "lvws-schedule/1", "instance": "x", "policy": "p", "makespan": 1, '
+                                  '"assignments": [], "decisions": null}'])
+def test_check_refuses_broken_schedules_with_exit_2(tmp_path, text):
+    (tmp_path / "s.json").write_text(text)
+    res = lvws("check", EXAMPLE, tmp_path / "s.json", check=False)
+    assert res.returncode == 2 and "s.json" in res.stderr and "Traceback" not in res.stderr, res.stderr
+
+
+def test_the_expert_cache_is_keyed_by_content_not_by_name(tmp_path):
+    """Two different unnamed instances once shared one cache record (450 % suboptimality
+    for an optimal schedule)."""
+    from lvws_ros.cli.evaluation import expert_records
+    from lvws_ros.core.datasets import DATASETS, dataset_instance
+    from lvws_ros.core.metrics import run_policy, summarize
+    from lvws_ros.core.problem import Instance
+    from lvws_ros.registry import make_policy
+
+    a, b = (dataset_instance(DATASETS["I"], k, 0) for k in (800, 801))
+    a, b = (Instance("", i.capabilities, i.robots, i.tasks) for i in (a, b))  # both unnamed
+    cache = tmp_path / "cache.json"
+    experts = expert_records([a, b], cache, 60, 2, progress=False)
+    assert len(experts) == 2 and len(json.loads(cache.read_text())) == 2
+    again = expert_records([b], cache, 60, 2, progress=False)  # from the cache
+    exact = make_policy("exact", workers=2)
+    rows = summarize([run_policy(b, exact)], again)
+    assert rows[0].proven == 1 and abs(rows[0].mean_suboptimality) < 1e-9
