@@ -91,6 +91,14 @@ def cmd_verify(args: argparse.Namespace) -> int:
     return 0 if not bad else 1
 
 
+def cmd_reindex(args: argparse.Namespace) -> int:
+    from lvws_ros.ros.bag import reindex
+
+    kept, conns = reindex(args.bag)
+    print(f"{args.bag}: rebuilt with {kept} messages on {conns} connections (original kept as *.mcap.orig)")
+    return 0
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
     from lvws_ros.ros.replay import replay
 
@@ -140,6 +148,10 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--policy", choices=POLICY_NAMES, default=None, help="default: the recorded one")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", default=None)
+
+    p = add("reindex", cmd_reindex, "rebuild the index and metadata.yaml of a bag whose recorder was killed "
+            "(like `ros2 bag reindex`)")
+    p.add_argument("bag")
 
     p = add("replay", cmd_replay, "republish a bag's messages with the recorded timing and QoS")
     p.add_argument("bag")

@@ -5,15 +5,32 @@ the snapshots below and calls :class:`OnlineScheduler`; the simulator produces t
 same snapshots directly, and ``lvws verify`` feeds recorded ones back. A decision step
 happens whenever a robot becomes available or a task becomes ready (section III-A).
 
-Robustness: snapshots older than the newest one seen are dropped (out of order);
-repeated snapshots trigger nothing (no new free robot, no new ready task); a robot is
-free only if the team says it is available *and* no running or just-assigned task
-holds it, so a stale team message never lets a busy robot be assigned; assignments
-the world has not acknowledged within ``ack_timeout`` seconds are released.
+Robustness (the rules the scheduler node follows, whatever a message holds):
+
+* A snapshot is checked before it is taken (:func:`check_team`, :func:`check_graph`):
+  an out-of-range status, a non-finite or out-of-range number, a malformed vector or an
+  unknown prerequisite id raises an InstanceError naming the message and the field, and
+  the snapshot is ignored (the last good one stays).
+* Order: a snapshot older than the newest one of its kind is dropped as out of order,
+  unless it is more than ``restart_jump`` seconds older: then the world restarted (a
+  simulator restart, or the newest stamp was bogus), the stamp order is reset, pending
+  assignments are released, and a notice says so.
+* Repeated snapshots trigger nothing (no new free robot, no new ready task).
+* A robot is free only if the team says it is available, it has no ``current_task``,
+  and no running or just-assigned task holds it; a busy robot whose ``busy_for`` is not
+  a finite number is busy for as long as the longest task.
+* A task is ready only if it is READY *and* all its prerequisites are DONE (checked
+  here, not trusted).
+* Assignments the world has not acknowledged within ``ack_timeout`` seconds, or whose
+  task or robots vanished from the latest snapshots, are released.
+
+What the node should report (restarts, releases, untrusted readiness) collects in
+:attr:`OnlineScheduler.notices`.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -21,10 +38,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, check_decision
-from lvws_ros.core.problem import Instance, Robot, Task
+from lvws_ros.core.problem import MAX_VALUE, Instance, Robot, Task
 from lvws_ros.errors import InstanceError
 
 BUSY_EPS = 1e-3  # a busy robot with an overdue estimate is still busy
+RESTART_JUMP = 10.0  # seconds a stamp may go back before the world counts as restarted
 
 
 @dataclass(frozen=True)
@@ -80,6 +98,49 @@ class OnlineDecision:
     policy: str = ""
 
 
+def _finite(value: float, where: str, low: float = 0.0, high: float = MAX_VALUE) -> None:
+    if not (math.isfinite(value) and low <= value <= high):
+        raise InstanceError(f"{where}: {value!r} is not a finite number in [{low:g}, {high:g}]")
+
+
+def _bits(values: Sequence[int], k: int, where: str) -> None:
+    if len(values) != k or any(v not in (0, 1) for v in values):
+        raise InstanceError(f"{where}: expected {k} entries of 0 or 1 (one per capability), got {list(values)[:20]}")
+
+
+def check_team(snap: TeamSnapshot) -> None:
+    """InstanceError naming the TeamState field when the snapshot cannot be used."""
+    _finite(snap.stamp, "TeamState header.stamp", high=math.inf)
+    k = len(snap.capability_names)
+    for n, r in enumerate(snap.robots):
+        where = f"TeamState robots[{n}] ({r.id!r})"
+        if not r.id:
+            raise InstanceError(f"TeamState robots[{n}].id: empty")
+        _bits(r.capabilities, k, f"{where}.capabilities")
+        _finite(r.payload, f"{where}.payload")
+
+
+def check_graph(snap: GraphSnapshot) -> None:
+    """InstanceError naming the TaskGraph field when the snapshot cannot be used."""
+    _finite(snap.stamp, "TaskGraph header.stamp", high=math.inf)
+    k = len(snap.capability_names)
+    ids = {t.id for t in snap.tasks}
+    for n, t in enumerate(snap.tasks):
+        where = f"TaskGraph tasks[{n}] ({t.id!r})"
+        if t.status not in set(TaskStatus):
+            raise InstanceError(f"{where}.status: {t.status} is not one of "
+                                + ", ".join(f"{s.name}={s.value}" for s in TaskStatus))
+        _bits(t.capabilities, k, f"{where}.capabilities")
+        _finite(t.payload, f"{where}.payload")
+        _finite(t.duration, f"{where}.duration")
+        unknown = [p for p in t.prerequisites if p not in ids]
+        if unknown:
+            raise InstanceError(f"{where}.prerequisites: unknown task id(s) {unknown}")
+        for name, value in (("start_time", t.start), ("end_time", t.end)):
+            if value is not None:
+                _finite(value, f"{where}.{name}", high=math.inf)
+
+
 def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online") -> Instance:
     """The scheduling instance the snapshots describe (InstanceError on bad content)."""
     if tuple(team.capability_names) != tuple(graph.capability_names):
@@ -91,30 +152,42 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
     return Instance(name, tuple(graph.capability_names), robots, tasks)
 
 
+def unready(graph: GraphSnapshot) -> list[tuple[str, str]]:
+    """(task, prerequisite) for each task the graph calls READY although a prerequisite
+    is not DONE: such a task is not ready."""
+    status = {t.id: t.status for t in graph.tasks}
+    return [(t.id, p) for t in graph.tasks if t.status == TaskStatus.READY
+            for p in t.prerequisites if status.get(p) != TaskStatus.DONE]
+
+
 def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
                 pending: Mapping[str, Sequence[str]] = {}) -> State:
     """The executor state at the newer snapshot's time, with ``pending`` (task -> robots
-    assigned but not yet acknowledged) counted as running."""
+    assigned but not yet acknowledged) counted as running (the rules of the module doc)."""
     now = max(team.stamp, graph.stamp)
     m, n = inst.num_tasks, inst.num_robots
-    status = np.array([t.status for t in graph.tasks], dtype=np.int8)
+    done = {t.id for t in graph.tasks if t.status == TaskStatus.DONE}
+    status = np.array([TaskStatus.QUEUED if t.status == TaskStatus.READY and not set(t.prerequisites) <= done
+                       else t.status for t in graph.tasks], dtype=np.int8)
     teams: list[tuple[int, ...]] = [tuple(inst.robot_index[r] for r in t.assigned_robots if r in inst.robot_index)
                                     for t in graph.tasks]
     for tid, robots in pending.items():
         j = inst.task_index.get(tid)
-        if j is not None and status[j] == TaskStatus.READY:
+        if j is not None and status[j] == TaskStatus.READY and all(r in inst.robot_index for r in robots):
             status[j] = TaskStatus.ASSIGNED
             teams[j] = tuple(inst.robot_index[r] for r in robots)
     free_at = np.full(n, now)
+    unknown_busy = max(float(inst.durations.max(initial=0.0)), BUSY_EPS)
     for i, r in enumerate(team.robots):
-        if not r.available:
-            free_at[i] = now + max(float(r.busy_for), BUSY_EPS)
+        if not r.available or r.current_task:
+            busy = float(r.busy_for) if math.isfinite(r.busy_for) else unknown_busy
+            free_at[i] = now + max(busy, BUSY_EPS)
     start = np.full(m, np.nan)
     for j, t in enumerate(graph.tasks):
         if status[j] == TaskStatus.ASSIGNED:
             idx = list(teams[j])
-            busy = [free_at[i] for i in idx if free_at[i] > now]
-            end = max(busy) if busy else now + inst.durations[j]  # just assigned, or an unacknowledged team
+            busy_until = [free_at[i] for i in idx if free_at[i] > now]
+            end = max(busy_until) if busy_until else now + inst.durations[j]  # just assigned, or unacknowledged
             free_at[idx] = np.maximum(free_at[idx], end)
             start[j] = end - inst.durations[j]
         elif status[j] == TaskStatus.DONE:
@@ -123,43 +196,82 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
 
 
 def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: GraphSnapshot, now: float,
-                  ack_timeout: float) -> dict[str, tuple[tuple[str, ...], float]]:
+                  ack_timeout: float, team: TeamSnapshot | None = None) -> dict[str, tuple[tuple[str, ...], float]]:
     """The assignments (task -> (robots, time sent)) the world has not acknowledged yet:
     a task no longer READY was acknowledged (or is gone); one older than ``ack_timeout``
-    was never taken and is offered again."""
+    was never taken and is offered again; one whose robots left ``team`` is released."""
     status = {t.id: t.status for t in graph.tasks}
-    return {k: v for k, v in pending.items() if status.get(k) == TaskStatus.READY and now - v[1] <= ack_timeout}
+    robots = None if team is None else {r.id for r in team.robots}
+    return {k: v for k, v in pending.items() if status.get(k) == TaskStatus.READY and now - v[1] <= ack_timeout
+            and (robots is None or set(v[0]) <= robots)}
 
 
 class OnlineScheduler:
     """Decides when a robot became available or a task became ready; see the module doc."""
 
-    def __init__(self, policy: Policy, ack_timeout: float = 5.0) -> None:
+    def __init__(self, policy: Policy, ack_timeout: float = 5.0, restart_jump: float = RESTART_JUMP) -> None:
         self.policy = policy
         self.ack_timeout = ack_timeout
+        self.restart_jump = restart_jump
         self.team: TeamSnapshot | None = None
         self.graph: GraphSnapshot | None = None
         self.pending: dict[str, tuple[tuple[str, ...], float]] = {}  # task -> (robots, when)
         self.step = 0
         self.dropped = 0  # out-of-order snapshots
+        self.restarts = 0
+        self.notices: list[str] = []  # for the node's diagnostics; it clears them once reported
         self._inst: Instance | None = None
         self._key: object = None
         self._seen_free: frozenset[str] = frozenset()
         self._seen_ready: frozenset[str] = frozenset()
 
-    def offer_team(self, snap: TeamSnapshot) -> bool:
-        if self.team is not None and snap.stamp < self.team.stamp:
+    def _in_order(self, kind: str, last: float | None, stamp: float) -> bool:
+        """False for an out-of-order snapshot; a big jump back restarts the world."""
+        if last is None or stamp >= last:
+            return True
+        if last - stamp <= self.restart_jump:
             self.dropped += 1
+            return False
+        self.restarts += 1
+        self.notices.append(f"{kind} stamp went back from {last:.3f} to {stamp:.3f} s: world restart assumed, "
+                            f"stamp order reset, {len(self.pending)} pending assignment(s) released")
+        self.pending.clear()
+        self.team = self.team if kind == "TaskGraph" else None
+        self.graph = self.graph if kind == "TeamState" else None
+        self._seen_free, self._seen_ready = frozenset(), frozenset()
+        return True
+
+    def offer_team(self, snap: TeamSnapshot) -> bool:
+        """Take a team snapshot (InstanceError, snapshot ignored, when malformed)."""
+        check_team(snap)
+        if not self._in_order("TeamState", self.team.stamp if self.team else None, snap.stamp):
             return False
         self.team = snap
         return True
 
     def offer_graph(self, snap: GraphSnapshot) -> bool:
-        if self.graph is not None and snap.stamp < self.graph.stamp:
-            self.dropped += 1
+        """Take a task-graph snapshot (InstanceError, snapshot ignored, when malformed)."""
+        check_graph(snap)
+        if not self._in_order("TaskGraph", self.graph.stamp if self.graph else None, snap.stamp):
             return False
         self.graph = snap
+        for task, pre in unready(snap):
+            self.notices.append(f"TaskGraph says {task} is READY but its prerequisite {pre} is not DONE: not ready")
         return True
+
+    def _release(self, now: float) -> None:
+        """Drop pending assignments that were acknowledged, timed out, or lost their task
+        or robots; report the last two kinds."""
+        assert self.team is not None and self.graph is not None
+        kept = still_pending(self.pending, self.graph, now, self.ack_timeout, self.team)
+        tasks = {t.id for t in self.graph.tasks}
+        robots = {r.id for r in self.team.robots}
+        for task, (team, _) in self.pending.items():
+            if task not in kept and (task not in tasks or not set(team) <= robots):
+                gone = [task] if task not in tasks else sorted(set(team) - robots)
+                self.notices.append(f"pending assignment {task} <- {'+'.join(team)} released: {', '.join(gone)} "
+                                    "left the latest snapshots")
+        self.pending = kept
 
     def instance(self) -> Instance:
         assert self.team is not None and self.graph is not None
@@ -177,7 +289,7 @@ class OnlineScheduler:
             return None
         inst = self.instance()
         now = max(self.team.stamp, self.graph.stamp)
-        self.pending = still_pending(self.pending, self.graph, now, self.ack_timeout)
+        self._release(now)
         state = build_state(inst, self.team, self.graph, {k: v[0] for k, v in self.pending.items()})
         free = frozenset(inst.robots[i].id for i in state.free_robots())
         ready = frozenset(inst.tasks[j].id for j in state.ready_tasks())

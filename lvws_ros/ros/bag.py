@@ -7,6 +7,7 @@ nodes use.
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -14,6 +15,7 @@ from typing import Any
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -23,7 +25,7 @@ from lvws_ros.ros.convert import decision_from_msg, graph_from_msg, team_from_ms
 from lvws_ros.ros.resources import msg_dir
 from lvws_ros.ros.topics import ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GRAPH_TOPIC, TEAM_TOPIC
 
-__all__ = ["Run", "open_writer", "qos_from_bag", "qos_to_bag", "read_run", "typestore"]
+__all__ = ["Run", "flush", "open_writer", "qos_from_bag", "qos_to_bag", "read_run", "reindex", "typestore"]
 
 LVWS_TYPES = ("RobotState", "TeamState", "Task", "TaskGraph", "Assignment", "AssignmentArray")
 
@@ -64,6 +66,83 @@ def qos_from_bag(conn: Any, min_depth: int = 1) -> QoSProfile:
         else ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if q.durability == QosDurability.TRANSIENT_LOCAL
         else DurabilityPolicy.VOLATILE)
+
+
+def flush(writer: Writer) -> None:
+    """Put every message written so far on disk: the pending MCAP chunk is closed (rosbags'
+    own ``close_chunk``) and the file flushed. A recorder calls this about once a second,
+    so a killed recording loses at most that second (:func:`reindex` opens it again)."""
+    storage = writer.storage
+    if isinstance(storage, McapWriter):
+        if any(storage.chunk.msgs.values()):
+            storage.close_chunk()
+        storage.bio.flush()
+
+
+def _recover(mcap_file: Path) -> tuple[dict[int, Any], dict[int, Any], list[Any], bool]:
+    """Schemas, channels and messages of every complete record of an MCAP file, however
+    it ends (a killed writer leaves no summary and maybe half a chunk); and whether it was
+    cut short."""
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    schemas: dict[int, Any] = {}
+    channels: dict[int, Any] = {}
+    messages: list[Any] = []
+    truncated = False
+    with mcap_file.open("rb") as f:
+        try:
+            for record in StreamReader(f, skip_magic=False).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    messages.append(record)
+        except Exception:  # the cut-off end of a killed recording, whatever mcap calls it
+            truncated = True
+    return schemas, channels, messages, truncated
+
+
+def reindex(path: str | Path) -> tuple[int, int]:
+    """``lvws reindex BAG`` (``ros2 bag reindex``): rebuild a bag whose recorder was killed.
+
+    Every complete message of the bag's MCAP file is written again with rosbags into a
+    proper MCAP file (chunk indexes, summary) with a new ``metadata.yaml``, so rosbags'
+    AnyReader and the ``mcap`` reader open it. The original file is kept beside it as
+    ``<name>.mcap.orig``. Returns (messages kept, connections)."""
+    from rosbags.rosbag2.metadata import parse_qos
+
+    bag = Path(path)
+    files = sorted(bag.glob("*.mcap")) if bag.is_dir() else []
+    if len(files) != 1:
+        raise BagError(f"{bag}: expected a bag folder with one .mcap file, found {[f.name for f in files]}")
+    schemas, channels, messages, _ = _recover(files[0])
+    if not channels:
+        raise BagError(f"{files[0]}: no complete channel record: nothing to recover")
+    tmp = bag.with_name(bag.name + ".reindex")
+    if tmp.exists():
+        raise BagError(f"{tmp}: exists (a previous reindex was interrupted); remove it first")
+    store = typestore()
+    writer = open_writer(tmp)
+    try:
+        conns = {}
+        for cid, ch in sorted(channels.items()):
+            qos = parse_qos(ch.metadata.get("offered_qos_profiles", "")) if ch.metadata.get("offered_qos_profiles") else []
+            conns[cid] = writer.add_connection(ch.topic, schemas[ch.schema_id].name, typestore=store,
+                                               offered_qos_profiles=qos)
+        for m in sorted(messages, key=lambda m: (m.log_time, m.sequence)):
+            writer.write(conns[m.channel_id], m.log_time, m.data)
+    except Exception as exc:
+        writer.close()
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise BagError(f"{bag}: cannot rebuild ({type(exc).__name__}: {exc})") from None
+    writer.close()
+    files[0].rename(files[0].with_name(files[0].name + ".orig"))
+    (tmp / f"{tmp.name}.mcap").rename(bag / files[0].name)
+    (bag / "metadata.yaml").write_text((tmp / "metadata.yaml").read_text().replace(f"{tmp.name}.mcap", files[0].name))
+    shutil.rmtree(tmp)
+    return len(messages), len(conns)
 
 
 def open_writer(path: str | Path) -> Writer:

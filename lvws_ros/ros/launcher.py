@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from lvws_ros.errors import LaunchError
+from lvws_ros.errors import ConfigError, LaunchError, PolicyError
 
 PR_SET_PDEATHSIG = 1
 
@@ -101,6 +101,21 @@ def _commands(bag: Path, *, policy: str, seed: int, model_path: str, rate: float
     }
 
 
+def _check_inputs(policy: str, model_path: str, config: str, params_file: str | None) -> None:
+    from lvws_ros.registry import POLICY_NAMES
+    from lvws_ros.ros.resources import case_study_config
+    from lvws_ros.ros.scheduler_node import check_params_file
+    from lvws_ros.sim.config import load_cell_config
+
+    load_cell_config(config or case_study_config())
+    if params_file:
+        check_params_file(params_file)
+    if policy not in POLICY_NAMES:
+        raise PolicyError(f"unknown policy {policy!r}; choose one of {', '.join(POLICY_NAMES)}")
+    if model_path and not Path(model_path).is_file():
+        raise ConfigError(f"{model_path}: no such model file")
+
+
 def _child_env(domain_id: int | None) -> dict[str, str]:
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(domain_id if domain_id is not None else random.SystemRandom().randint(1, 101))
@@ -145,7 +160,10 @@ def launch(*, policy: str = "lvws", seed: int = 0, model_path: str = "", rate: f
            config: str = "", bag_dir: str | Path = "bags", out_dir: str | Path = "out", name: str | None = None,
            params_file: str | None = None, gif: bool = True, timeout: float = 600.0,
            domain_id: int | None = None, sync: bool = True, log: Any = print) -> LaunchResult:
-    """Run the case study end to end; raises LaunchError (children stopped) on failure."""
+    """Run the case study end to end; raises LaunchError (children stopped) on failure.
+    The configuration, the parameter file, the policy and the model are checked before
+    any process starts (ConfigError / PolicyError)."""
+    _check_inputs(policy, model_path, config, params_file)
     run = name or time.strftime(f"case-study-{policy}-%Y%m%d-%H%M%S")
     bag = Path(bag_dir) / run
     out = Path(out_dir) / run

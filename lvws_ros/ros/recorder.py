@@ -4,7 +4,9 @@ Records /lvws/team_state, /lvws/task_graph, /lvws/assignments, /lvws/markers, /c
 /diagnostics with raw (serialized) subscriptions, so the CDR bytes go to the bag as they
 came; each connection keeps its topic's QoS. Custom types come from lvws_msgs' .msg
 files. SIGINT or SIGTERM at any moment closes the bag: it stays readable with
-everything received until then.
+everything received until then. Every FLUSH_SECONDS the messages received so far go
+to disk as a closed MCAP chunk, so even after SIGKILL at most the last second is lost:
+``lvws reindex BAG`` rebuilds such a bag's index and metadata.
 """
 
 from __future__ import annotations
@@ -15,15 +17,17 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
-from lvws_ros.ros.bag import open_writer, qos_to_bag, typestore
+from lvws_ros.ros.bag import flush, open_writer, qos_to_bag, typestore
 from lvws_ros.ros.entry import node_main
 from lvws_ros.ros.topics import TOPICS, message_class
 
 RECORDER_DEPTH = 10000  # history per subscription: bursts wait here instead of being overwritten
+FLUSH_SECONDS = 0.5  # a killed recording loses at most this much (lvws reindex opens it again)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,6 +57,8 @@ class Recorder(Node):
             conn = self.writer.add_connection(topic, type_name, typestore=store, offered_qos_profiles=[qos_to_bag(qos)])
             self.create_subscription(message_class(type_name), topic, self._writer_for(conn), recording_qos(qos),
                                      raw=True)
+        # on the steady clock: a paused simulator must not stop the flushing
+        self.create_timer(FLUSH_SECONDS, lambda: flush(self.writer), clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _writer_for(self, conn: object) -> Callable[[bytes], None]:
         def write(data: bytes) -> None:

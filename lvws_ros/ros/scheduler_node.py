@@ -16,14 +16,19 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from lvws_ros.core.online import OnlineScheduler
-from lvws_ros.errors import LvwsError
+from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES, make_policy
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main
@@ -35,7 +40,46 @@ DESCRIPTION = (
     "(--ros-args -p NAME:=VALUE or --params-file config/scheduler.yaml)."
 )
 DEFAULT_POLICY = "lvws"
+# name -> (type, default); the ones a params file may set
+PARAMETERS: dict[str, tuple[type, object]] = {"policy": (str, DEFAULT_POLICY), "model_path": (str, ""),
+                                              "seed": (int, 0), "ack_timeout": (float, 5.0),
+                                              "use_sim_time": (bool, False)}
 SETTLE_SECONDS = 0.2  # wall time to wait for the matching team/graph message
+
+
+def check_params_file(path: str | Path, node: str = "scheduler") -> dict[str, Any]:
+    """The scheduler's parameters in a ROS 2 params file (``<node>:`` or ``/**:`` then
+    ``ros__parameters:``), checked without starting anything: ConfigError naming the
+    file and the parameter."""
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the parameter file: {exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: malformed YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{p}: expected a mapping of node names to ros__parameters")
+    params: dict[str, Any] = {}
+    for key in ("/**", node, f"/{node}"):
+        section = data.get(key)
+        if section is None:
+            continue
+        if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
+            raise ConfigError(f"{p}: {key}: expected a 'ros__parameters' mapping")
+        params.update(section["ros__parameters"])
+    for name, value in params.items():
+        if name not in PARAMETERS:
+            raise ConfigError(f"{p}: {node}.{name}: unknown parameter (known: {', '.join(PARAMETERS)})")
+        kind = PARAMETERS[name][0]
+        if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
+            if not (kind is float and isinstance(value, int) and not isinstance(value, bool)):
+                raise ConfigError(f"{p}: {node}.{name}: expected {kind.__name__}, got {value!r}")
+    if "policy" in params and params["policy"] not in POLICY_NAMES:
+        raise ConfigError(f"{p}: {node}.policy: unknown {params['policy']!r}; one of {', '.join(POLICY_NAMES)}")
+    if params.get("model_path") and not Path(params["model_path"]).is_file():
+        raise ConfigError(f"{p}: {node}.model_path: no such file {params['model_path']!r}")
+    return params
 
 
 class SchedulerNode(Node):
@@ -59,18 +103,39 @@ class SchedulerNode(Node):
         self.create_timer(0.05, self.on_settle, clock=steady)
         self.unsynced_since: float | None = None
         self.error = ""
+        self.rejected: dict[str, str] = {}  # message kind -> why its latest one was ignored
         self.last_latency = 0.0
         self.received = 0
         self.get_logger().info(f"policy {self.policy_name}, seed {self.seed}, model {model_path or 'shipped'}")
 
     def on_team(self, msg: TeamState) -> None:
-        self.received += 1
-        if self.core.offer_team(convert.team_from_msg(msg)):
-            self.maybe_step()
+        self.guarded(lambda: self.offer("TeamState", lambda: self.core.offer_team(convert.team_from_msg(msg))))
 
     def on_graph(self, msg: TaskGraph) -> None:
+        self.guarded(lambda: self.offer("TaskGraph", lambda: self.core.offer_graph(convert.graph_from_msg(msg))))
+
+    def guarded(self, work: Callable[[], None]) -> None:
+        """No message content may stop the node: a bug is logged with its traceback and
+        reported (ERROR), and the node serves the next message."""
+        try:
+            work()
+        except Exception as exc:
+            self.error = f"internal error {type(exc).__name__}: {exc}"
+            self.get_logger().error(traceback.format_exc())
+            self.publish_diagnostics(DiagnosticStatus.ERROR, self.error)
+
+    def offer(self, kind: str, take: Callable[[], bool]) -> None:
+        """Hand a snapshot to the core; a malformed one is reported (ERROR) and ignored."""
         self.received += 1
-        if self.core.offer_graph(convert.graph_from_msg(msg)):
+        try:
+            taken = take()
+        except LvwsError as exc:
+            self.rejected[kind] = str(exc)
+            self.report(DiagnosticStatus.ERROR, f"{kind} ignored: {exc}")
+            return
+        self.rejected.pop(kind, None)
+        self.flush_notices()
+        if taken:
             self.maybe_step()
 
     def maybe_step(self) -> None:
@@ -86,17 +151,17 @@ class SchedulerNode(Node):
     def on_settle(self) -> None:
         if self.unsynced_since is not None and time.monotonic() - self.unsynced_since > SETTLE_SECONDS:
             self.unsynced_since = None
-            self.step()
+            self.guarded(self.step)
 
     def step(self) -> None:
         try:
             decision = self.core.decide()
         except LvwsError as exc:
             self.error = f"{type(exc).__name__}: {exc}"
-            self.get_logger().error(self.error)
-            self.publish_diagnostics()
+            self.report(DiagnosticStatus.ERROR, self.error)
             return
         self.error = ""
+        self.flush_notices()
         if decision is None:
             return
         self.last_latency = decision.latency
@@ -105,15 +170,32 @@ class SchedulerNode(Node):
         self.get_logger().info(f"step {decision.step}: {made}; waiting {', '.join(decision.waiting) or '-'} "
                                f"({1000 * decision.latency:.1f} ms)")
 
-    def publish_diagnostics(self) -> None:
+    def flush_notices(self) -> None:
+        """The core's notices (world restarts, released assignments, untrusted readiness) as WARN."""
+        while self.core.notices:
+            self.report(DiagnosticStatus.WARN, self.core.notices.pop(0))
+
+    def report(self, level: bytes, message: str) -> None:
+        """Log and publish one diagnostics status now (besides the periodic one)."""
+        if level == DiagnosticStatus.ERROR:  # one call site per severity (rclpy's rule)
+            self.get_logger().error(message)
+        else:
+            self.get_logger().warning(message)
+        self.publish_diagnostics(level, message)
+
+    def publish_diagnostics(self, level: bytes | None = None, message: str = "") -> None:
+        """The node's health: ERROR while the latest message of a kind was refused or the
+        last step failed, else OK; ``level``/``message`` publish one event now."""
         status = DiagnosticStatus(name="lvws_scheduler", hardware_id=self.get_name())
-        status.level = DiagnosticStatus.ERROR if self.error else DiagnosticStatus.OK
-        status.message = self.error or ("waiting for team and task graph" if self.core.team is None
-                                        or self.core.graph is None else "ok")
+        problem = self.error or "; ".join(f"{k} ignored: {v}" for k, v in sorted(self.rejected.items()))
+        status.level = level if level is not None else (DiagnosticStatus.ERROR if problem else DiagnosticStatus.OK)
+        status.message = message or problem or ("waiting for team and task graph" if self.core.team is None
+                                                or self.core.graph is None else "ok")
         status.values = [KeyValue(key=k, value=str(v)) for k, v in (
             ("policy", self.policy_name), ("seed", self.seed), ("decisions", self.core.step),
             ("last_latency_ms", f"{1000 * self.last_latency:.3f}"), ("messages", self.received),
-            ("out_of_order_dropped", self.core.dropped), ("pending", len(self.core.pending)))]
+            ("out_of_order_dropped", self.core.dropped), ("world_restarts", self.core.restarts),
+            ("pending", len(self.core.pending)))]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)

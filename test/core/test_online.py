@@ -100,12 +100,13 @@ def test_capabilities_must_agree():
 
 
 def test_unknown_prerequisite_is_an_instance_error():
-    sim, online = fresh()
-    graph = sim.graph_snapshot()
+    _sim, online = fresh()
+    graph = online.graph
+    assert graph is not None
     bad = (dataclasses.replace(graph.tasks[0], prerequisites=("t99",)), *graph.tasks[1:])
-    online.offer_graph(dataclasses.replace(graph, tasks=bad))
-    with pytest.raises(InstanceError, match="t99"):
-        online.decide()
+    with pytest.raises(InstanceError, match=r"TaskGraph tasks\[0\] \('t01'\)\.prerequisites: unknown .*t99"):
+        online.offer_graph(dataclasses.replace(graph, tasks=bad))  # refused before it is taken
+    assert online.graph is graph
 
 
 def test_hand_made_snapshots():
@@ -124,3 +125,92 @@ def test_hand_made_snapshots():
     online.offer_graph(graph)
     d = online.decide()
     assert d is not None and d.assignments == (("t1", ("a", "b")),) and d.waiting == ()
+
+
+def _hand_made(stamp: float = 1.0):
+    from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
+
+    team = TeamSnapshot(stamp, ("lift", "drive"), (
+        RobotInfo("a", "x", True, (1, 1), 5.0), RobotInfo("b", "y", True, (1, 1), 5.0)))
+    graph = GraphSnapshot(stamp, ("lift", "drive"), (
+        TaskInfo("t0", 1, (1, 0), 1.0, 5.0), TaskInfo("t1", 1, (0, 1), 1.0, 2.0)))
+    return team, graph
+
+
+def _fed(team, graph) -> OnlineScheduler:
+    online = OnlineScheduler(make_policy("grp"))
+    online.offer_team(team)
+    online.offer_graph(graph)
+    return online
+
+
+@pytest.mark.parametrize(("field", "value", "words"), [
+    ("status", 200, r"tasks\[0\] \('t0'\)\.status: 200 is not one of QUEUED=0"),
+    ("duration", float("nan"), r"tasks\[0\] \('t0'\)\.duration: nan is not a finite number"),
+    ("payload", float("inf"), r"tasks\[0\] \('t0'\)\.payload: inf"),
+    ("capabilities", (1, 0, 1), r"tasks\[0\] \('t0'\)\.capabilities: expected 2 entries"),
+])
+def test_a_malformed_task_is_refused_naming_the_field(field, value, words):
+    team, graph = _hand_made()
+    online = _fed(team, graph)
+    bad = dataclasses.replace(graph, stamp=2.0, tasks=(dataclasses.replace(graph.tasks[0], **{field: value}),
+                                                       graph.tasks[1]))
+    with pytest.raises(InstanceError, match="TaskGraph " + words):
+        online.offer_graph(bad)
+    assert online.graph is graph  # ignored: the last good graph stays
+
+
+def test_a_robot_with_nan_payload_is_refused_and_nan_busy_for_means_busy():
+    team, graph = _hand_made()
+    online = _fed(team, graph)
+    bad = dataclasses.replace(team, stamp=2.0, robots=(dataclasses.replace(team.robots[0], payload=float("nan")),
+                                                       team.robots[1]))
+    with pytest.raises(InstanceError, match=r"TeamState robots\[0\] \('a'\)\.payload"):
+        online.offer_team(bad)
+    busy = dataclasses.replace(team, robots=(dataclasses.replace(team.robots[0], available=False,
+                                                                 busy_for=float("nan")), team.robots[1]))
+    d = _fed(busy, graph).decide()
+    assert d is not None and all(r == ("b",) for _, r in d.assignments) and d.assignments
+
+
+def test_a_robot_with_a_current_task_is_busy_whatever_available_says():
+    team, graph = _hand_made()
+    claims = dataclasses.replace(team, robots=(dataclasses.replace(team.robots[0], current_task="t9"),
+                                               team.robots[1]))
+    d = _fed(claims, graph).decide()
+    assert d is not None and all("a" not in r for _, r in d.assignments)
+
+
+def test_readiness_is_checked_not_trusted():
+    team, graph = _hand_made()
+    liar = dataclasses.replace(graph, tasks=(graph.tasks[0], dataclasses.replace(graph.tasks[1], prerequisites=("t0",))))
+    online = _fed(team, liar)
+    d = online.decide()
+    assert d is not None and [t for t, _ in d.assignments] == ["t0"]
+    assert any("t1 is READY but its prerequisite t0 is not DONE" in n for n in online.notices)
+
+
+def test_a_stamp_far_ahead_does_not_deafen_the_scheduler():
+    team, graph = _hand_made(stamp=1.0)
+    online = _fed(team, graph)
+    assert online.offer_team(dataclasses.replace(team, stamp=2147483647.0))
+    assert not online.offer_team(dataclasses.replace(team, stamp=2147483646.0))  # slightly older: out of order
+    assert online.offer_team(dataclasses.replace(team, stamp=3.0))  # far back: a restart
+    assert online.offer_graph(dataclasses.replace(graph, stamp=3.0))
+    assert online.restarts == 1 and any("world restart" in n for n in online.notices)
+    d = online.decide()
+    assert d is not None and d.assignments and d.team_stamp == 3.0
+
+
+def test_a_robot_that_vanishes_releases_its_pending_assignment():
+    team, graph = _hand_made()
+    online = _fed(team, graph)
+    d = online.decide()
+    assert d is not None and len(d.assignments) == 2
+    gone = dataclasses.replace(team, stamp=2.0, robots=(team.robots[1],))
+    online.offer_team(gone)
+    online.offer_graph(dataclasses.replace(graph, stamp=2.0))
+    d2 = online.decide()  # no KeyError: the assignment of the robot that left is released
+    assert any("left the latest snapshots" in n for n in online.notices)
+    assert all("a" not in robots for robots, _ in online.pending.values())
+    assert d2 is None or all("a" not in r for _, r in d2.assignments)

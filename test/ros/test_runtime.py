@@ -311,12 +311,34 @@ def test_a_crashed_child_stops_the_run_with_the_reason(tmp_path):
     from lvws_ros.errors import LaunchError
     from lvws_ros.ros.launcher import launch
 
-    with pytest.raises(LaunchError, match=r"scheduler exited early with code 2[\s\S]*unknown 'bogus'"):
-        launch(policy="bogus", bag_dir=tmp_path / "bags", out_dir=tmp_path / "out", name="crash", gif=False,
-               timeout=120.0, log=lambda _t: None)
+    broken = tmp_path / "broken.pt"
+    broken.write_bytes(b"not a checkpoint")  # exists, so it passes the checks before launch
+    with pytest.raises(LaunchError, match=r"scheduler exited early with code 2[\s\S]*broken.pt"):
+        launch(policy="lvws", model_path=str(broken), bag_dir=tmp_path / "bags", out_dir=tmp_path / "out",
+               name="crash", gif=False, timeout=120.0, log=lambda _t: None)
     pids = json.loads((tmp_path / "out" / "crash" / "pids.json").read_text())
     assert set(pids) == {"recorder", "scheduler", "cell_sim"} and _gone(pids)
     assert read_with_anyreader(tmp_path / "bags" / "crash") is not None  # the bag was closed properly
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--config", "/nope.yaml"], "/nope.yaml: no such file"),
+    (["--params-file", "/nope.yaml"], "/nope.yaml: cannot read the parameter file"),
+    (["--params-file", "BAD_POLICY"], "scheduler.policy: unknown 'bogus'"),
+    (["--params-file", "BAD_NAME"], "scheduler.polcy: unknown parameter"),
+])
+def test_launch_checks_its_files_before_starting_anything(tmp_path, args, words):
+    bad_policy, bad_name = tmp_path / "p1.yaml", tmp_path / "p2.yaml"
+    bad_policy.write_text("scheduler:\n  ros__parameters:\n    policy: bogus\n")
+    bad_name.write_text("/**:\n  ros__parameters:\n    polcy: grp\n")
+    args = [str({"BAD_POLICY": bad_policy, "BAD_NAME": bad_name}.get(a, a)) for a in args]
+    t0 = time.monotonic()
+    res = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "launch", *args, "--bag-dir", str(tmp_path / "b"),
+                          "--out-dir", str(tmp_path / "o"), "--name", "x"], capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 2 and words in res.stderr and "Traceback" not in res.stderr, res.stderr
+    assert not (tmp_path / "o").exists() and not (tmp_path / "b").exists()  # no process was started
+    assert time.monotonic() - t0 < 60
 
 
 def test_ctrl_c_on_the_launcher_stops_every_child(tmp_path):
