@@ -15,7 +15,7 @@ from lvws_ros.core.problem import MAX_VALUE
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.errors import InstanceError, ScheduleError
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomSubteamPolicy
-from test_problem import BASE
+from samples import BASE
 
 
 def _file(tmp_path, text: str | bytes, name: str = "f.json"):

@@ -34,7 +34,7 @@ from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.errors import InstanceError, ScheduleError
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
-from test_problem import BASE
+from samples import BASE
 
 pytestmark = pytest.mark.fuzz
 EXAMPLES = int(os.environ.get("LVWS_FUZZ_EXAMPLES", "250"))

@@ -10,7 +10,7 @@ import pytest
 
 from lvws_ros.core.formats import instance_from_dict, save_instance, schedule_from_dict, schedule_to_dict
 from lvws_ros.core.schedule import Schedule, check_schedule
-from test_problem import BASE
+from samples import BASE
 
 GOOD = {
     "format": "lvws-schedule/1",
