@@ -86,6 +86,35 @@ def random_instance(rng: np.random.Generator, num_robots: int, num_tasks: int, n
     return Instance(name, CAPABILITY_NAMES[:k], robots, tuple(tasks))
 
 
+SUBTEAM_ROBOT_PAYLOAD = (1, 10)
+SUBTEAM_TASK_PAYLOAD_MEAN = 16.0
+
+
+def subteam_heavy_instance(rng: np.random.Generator, num_robots: int, num_tasks: int, name: str,
+                           num_capabilities: int = 3) -> Instance:
+    """A fleet-style instance where most tasks need 2-6 robots: robot payloads uniform in
+    1..10, task payloads Poisson(16) clipped to 1..60 (and to the team's payload), three
+    capabilities held by about half of the robots each, the same random DAG as the
+    paper's datasets. Used by the scale benchmarks (issue "subteams at scale")."""
+    k = num_capabilities
+    robot_caps = (rng.random((num_robots, k)) < 0.5).astype(int)
+    robot_caps[~robot_caps.any(axis=1), 0] = 1
+    robot_caps[rng.integers(num_robots, size=k), np.arange(k)] = 1  # every capability held
+    payloads = rng.integers(SUBTEAM_ROBOT_PAYLOAD[0], SUBTEAM_ROBOT_PAYLOAD[1] + 1, size=num_robots)
+    robots = tuple(Robot(f"r{i}", tuple(int(c) for c in robot_caps[i]), float(payloads[i])) for i in range(num_robots))
+    total = float(payloads.sum())
+    tasks = []
+    for j in range(num_tasks):
+        caps = _nonzero_vector(rng, k)
+        need = float(min(np.clip(rng.poisson(SUBTEAM_TASK_PAYLOAD_MEAN), 1, 60), total))
+        duration = float(rng.integers(DURATION_RANGE[0], DURATION_RANGE[1] + 1))
+        n_pre = min(j, int(rng.choice(len(PREREQ_PROBS), p=PREREQ_PROBS)))
+        pre = sorted(int(p) for p in rng.choice(j, size=n_pre, replace=False)) if n_pre else []
+        tasks.append(Task(f"t{j}", caps, need, duration, tuple(f"t{p}" for p in pre)))
+    return Instance(name, CAPABILITY_NAMES[:k] if k <= len(CAPABILITY_NAMES) else tuple(f"c{c}" for c in range(k)),
+                    robots, tuple(tasks))
+
+
 def dataset_instance(spec: DatasetSpec, index: int, seed: int) -> Instance:
     rng = np.random.default_rng([seed, spec.code, index])
     n = int(rng.integers(spec.robots[0], spec.robots[1] + 1))

@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
-from lvws_ros.core.subteams import TOLERANCE, FloatArray, covers, team_candidates
+from lvws_ros.core.subteams import TOLERANCE, FloatArray, cover_with, covers
 from lvws_ros.errors import PolicyError
 
 
@@ -187,7 +187,8 @@ def voluntary_waits(state: State, decision: Decision) -> dict[int, tuple[int, ..
 
     A wait is voluntary (the paper's behaviour, section III-A) when some ready task the
     decision leaves unassigned has a covering subteam (Eqs. 10-11) among the robots it
-    leaves free that includes the robot. Returns robot index -> those task indices.
+    leaves free that includes the robot and needs it (found constructively,
+    :func:`~lvws_ros.core.subteams.cover_with`). Returns robot index -> those task indices.
     """
     inst = state.instance
     taken = {r for _, team in decision.assignments for r in team}
@@ -196,14 +197,13 @@ def voluntary_waits(state: State, decision: Decision) -> dict[int, tuple[int, ..
     out: dict[int, list[int]] = {}
     if not left:
         return {}
+    caps, payloads = inst.robot_caps[left], inst.robot_payload[left]
     for j in state.ready_tasks():
-        if j in started:
+        if j in started or not covers(caps, payloads, inst.task_caps[j], inst.tasks[j].payload):
             continue
-        for team in team_candidates(inst.robot_caps[left], inst.robot_payload[left], inst.task_caps[j],
-                                    inst.tasks[j].payload):
-            for k in team:
-                if j not in out.setdefault(left[k], []):
-                    out[left[k]].append(j)
+        for k, r in enumerate(left):
+            if cover_with(caps, payloads, inst.task_caps[j], inst.tasks[j].payload, k) is not None:
+                out.setdefault(r, []).append(j)
     return {r: tuple(ts) for r, ts in sorted(out.items())}
 
 

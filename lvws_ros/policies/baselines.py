@@ -8,8 +8,8 @@
 
 All are work-conserving: they start every ready task for which free robots suffice.
 Subteams are inclusion-minimal (a superset only ties up more robots, the duration
-being the same); with more than 16 free robots the candidates come from
-:func:`lvws_ros.core.subteams.shortlist`.
+being the same) and built constructively (:mod:`lvws_ros.core.subteams`), never by
+enumerating subsets: any team size, polynomial time.
 """
 
 from __future__ import annotations
@@ -18,20 +18,12 @@ import numpy as np
 
 from lvws_ros.core.executor import Decision, State
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import team_candidates
-
-
-def candidate_teams(state: State, task: int, free: list[int]) -> list[tuple[int, ...]]:
-    """Minimal covering subteams for ``task`` among the ``free`` robots (global indices)."""
-    inst = state.instance
-    if not free:
-        return []
-    local = team_candidates(inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[task], inst.tasks[task].payload)
-    return [tuple(free[i] for i in team) for team in local]
+from lvws_ros.core.subteams import BoolArray, FloatArray, covered, lightest_cover, random_cover
 
 
 class _SequentialPolicy:
-    """Takes ready tasks one by one and gives each a subteam chosen by ``pick``."""
+    """Takes ready tasks one by one and gives each a subteam of the free robots chosen
+    by ``pick`` (None: no subteam of them covers the task)."""
 
     name = "sequential"
 
@@ -45,28 +37,41 @@ class _SequentialPolicy:
     def order(self, ready: list[int]) -> list[int]:
         return ready
 
-    def pick(self, state: State, teams: list[tuple[int, ...]]) -> tuple[int, ...]:
+    def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
+             need_payload: float) -> tuple[int, ...] | None:
         raise NotImplementedError
 
     def decide(self, state: State) -> Decision:
-        free = state.free_robots()
+        inst = state.instance
+        free = np.array(state.free_robots(), dtype=np.int64)
+        order = np.array(self.order(state.ready_tasks()), dtype=np.int64)
         out = []
-        for task in self.order(state.ready_tasks()):
-            teams = candidate_teams(state, task, free)
-            if not teams:
+        # tasks the free robots together can cover, all at once (a subset covers no more)
+        possible = covered(inst.robot_caps[free].any(axis=0), inst.robot_payload[free].sum(),
+                           inst.task_caps[order], inst.task_payload[order])
+        for k, task in enumerate(order):
+            if not len(free):
+                break
+            if not possible[k]:
                 continue
-            team = self.pick(state, teams)
-            out.append((task, team))
-            free = [r for r in free if r not in team]
-        return Decision(tuple(out), tuple(free))
+            team = self.pick(inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[task],
+                             inst.tasks[task].payload)
+            if team is None:
+                continue
+            out.append((int(task), tuple(int(free[i]) for i in team)))
+            free = np.delete(free, list(team))
+            rest = order[k + 1:]
+            possible[k + 1:] = covered(inst.robot_caps[free].any(axis=0), inst.robot_payload[free].sum(),
+                                       inst.task_caps[rest], inst.task_payload[rest])
+        return Decision(tuple(out), tuple(int(i) for i in free))
 
 
 class GreedyPayloadPolicy(_SequentialPolicy):
     name = "grp"
 
-    def pick(self, state: State, teams: list[tuple[int, ...]]) -> tuple[int, ...]:
-        pay = state.instance.robot_payload
-        return min(teams, key=lambda team: (float(pay[list(team)].sum()), len(team), team))
+    def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
+             need_payload: float) -> tuple[int, ...] | None:
+        return lightest_cover(caps, payloads, need_caps, need_payload)
 
 
 class RandomPolicy(_SequentialPolicy):
@@ -75,14 +80,17 @@ class RandomPolicy(_SequentialPolicy):
     def order(self, ready: list[int]) -> list[int]:
         return [ready[i] for i in self.rng.permutation(len(ready))]
 
-    def pick(self, state: State, teams: list[tuple[int, ...]]) -> tuple[int, ...]:
-        singles = [t for t in teams if len(t) == 1]
-        pool = singles or teams
-        return pool[int(self.rng.integers(len(pool)))]
+    def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
+             need_payload: float) -> tuple[int, ...] | None:
+        alone = np.flatnonzero(covered(caps, payloads, need_caps[None, :], need_payload))
+        if len(alone):
+            return (int(alone[int(self.rng.integers(len(alone)))]),)
+        return random_cover(caps, payloads, need_caps, need_payload, self.rng)
 
 
 class RandomSubteamPolicy(RandomPolicy):
     name = "rand_subteam"
 
-    def pick(self, state: State, teams: list[tuple[int, ...]]) -> tuple[int, ...]:
-        return teams[int(self.rng.integers(len(teams)))]
+    def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
+             need_payload: float) -> tuple[int, ...] | None:
+        return random_cover(caps, payloads, need_caps, need_payload, self.rng)

@@ -36,11 +36,12 @@ from lvws_ros.core.executor import Decision, SimulationResult, State, TaskStatus
 from lvws_ros.core.matching import Match, check_shapes, match_reward
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
-from lvws_ros.core.subteams import MAX_ENUMERATED, TOLERANCE, BoolArray, FloatArray, minimal_subteams
+from lvws_ros.core.subteams import MAX_ENUMERATED, TOLERANCE, BoolArray, FloatArray, minimal_subteams, prune
 from lvws_ros.errors import ExpertError
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomSubteamPolicy
 
 SCALES = (1, 10, 100, 1000)
+COALITION_LIMIT = 20_000  # coalitions listed in all before the boolean model is used
 
 
 @dataclass
@@ -114,7 +115,7 @@ class _Horizon:
     exact_scale: bool
     dur: dict[int, int]
     free_at: list[int]
-    teams: dict[int, list[tuple[int, ...]]]
+    teams: dict[int, list[tuple[int, ...]]] | None  # minimal coalitions (coalition model) or None
     head: dict[int, int]
     tail: dict[int, int]
     lower: int
@@ -124,7 +125,23 @@ class _Horizon:
         return round(x * self.scale)
 
 
-def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule) -> _Horizon:
+def _coalitions(inst: Instance, todo: list[int]) -> dict[int, list[tuple[int, ...]]] | None:
+    """The minimal covering coalitions of each task when the team is small enough to list
+    them (MAX_ENUMERATED robots, COALITION_LIMIT coalitions in all), else None: the
+    robot-task boolean model is used instead."""
+    if inst.num_robots > MAX_ENUMERATED:
+        return None
+    teams: dict[int, list[tuple[int, ...]]] = {}
+    for j in todo:
+        teams[j] = minimal_subteams(inst.robot_caps, inst.robot_payload, inst.task_caps[j], inst.tasks[j].payload)
+        if not teams[j]:
+            raise ExpertError(f"task {inst.tasks[j].id!r} has no covering subteam")
+        if sum(len(t) for t in teams.values()) > COALITION_LIMIT:
+            return None
+    return teams
+
+
+def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule, coalitions: bool = True) -> _Horizon:
     status = state.task_status
     fixed_end = {j: float(state.task_start[j] + inst.durations[j]) for j in range(inst.num_tasks)
                  if status[j] in (TaskStatus.ASSIGNED, TaskStatus.DONE)}
@@ -137,19 +154,22 @@ def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule) -> _
 
     dur = {j: max(1, ticks(inst.durations[j])) for j in todo}
     free_at = [max(ticks(b), ticks(t0)) for b in state.robot_free_at]
-    teams = {j: minimal_subteams(inst.robot_caps, inst.robot_payload, inst.task_caps[j], inst.tasks[j].payload)
-             for j in todo}
-    for j in todo:
-        if not teams[j]:
-            raise ExpertError(f"task {inst.tasks[j].id!r} has no covering subteam")
-    # Start windows: heads (earliest start) in topological order, tails backwards.
+    teams = _coalitions(inst, todo) if coalitions else None
+    free = np.array(free_at)
+    # Start windows: heads (earliest start) in topological order, tails backwards. A task
+    # cannot start before a holder of each capability it needs is free (or, with the
+    # coalitions listed, before its earliest coalition is).
     head: dict[int, int] = {}
     for j in inst.topological_order:
         if j in dur:
             lb = ticks(t0)
             for p in inst.prerequisites[j]:
                 lb = max(lb, head[p] + dur[p] if p in dur else ticks(fixed_end[p]))
-            head[j] = max(lb, min(max(free_at[r] for r in team) for team in teams[j]))
+            for c in np.flatnonzero(inst.task_caps[j]):
+                lb = max(lb, int(free[inst.robot_caps[:, c]].min()))
+            if teams is not None:
+                lb = max(lb, min(max(free_at[r] for r in team) for team in teams[j]))
+            head[j] = lb
     tail: dict[int, int] = {}
     for j in reversed(inst.topological_order):
         if j in dur:
@@ -163,7 +183,8 @@ def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule) -> _
 class _Model:
     model: cp_model.CpModel
     start: dict[int, cp_model.IntVar]
-    choice: dict[int, list[cp_model.IntVar]]
+    member: dict[int, dict[int, cp_model.IntVar]]  # task -> robot -> in its subteam
+    choice: dict[int, list[cp_model.IntVar]] | None  # coalition model: task -> one bool per coalition
     makespan: cp_model.IntVar
 
 
@@ -171,7 +192,9 @@ def _build_model(inst: Instance, h: _Horizon) -> _Model:
     """Start variables, one exactly-one choice of minimal subteam per task, per-robot
     no-overlap, precedence, makespan, and the redundant cumulatives."""
     model = cp_model.CpModel()
-    todo, dur, teams = h.todo, h.dur, h.teams
+    todo, dur = h.todo, h.dur
+    teams = h.teams
+    assert teams is not None
     start = {j: model.new_int_var(h.head[j], h.upper - h.tail[j], f"S_{j}") for j in todo}
     makespan = model.new_int_var(h.lower, h.upper, "C")
     task_iv = {j: model.new_fixed_size_interval_var(start[j], dur[j], f"I_{j}") for j in todo}
@@ -181,10 +204,13 @@ def _build_model(inst: Instance, h: _Horizon) -> _Model:
     payload_use: dict[int, cp_model.IntVar] = {}
     cap_use: list[dict[int, cp_model.IntVar]] = [{} for _ in inst.capabilities]
     pay_int = np.round(inst.robot_payload * 1000).astype(np.int64)
+    member: dict[int, dict[int, cp_model.IntVar]] = {}
     for j in todo:
         model.add_exactly_one(choice[j])
+        member[j] = {}
         for r in sorted({r for team in teams[j] for r in team}):
             y = model.new_bool_var(f"y_{r}_{j}")
+            member[j][r] = y
             model.add(y == sum(choice[j][k] for k, team in enumerate(teams[j]) if r in team))
             per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
             if h.free_at[r] > h.head[j]:
@@ -211,7 +237,50 @@ def _build_model(inst: Instance, h: _Horizon) -> _Model:
             model.add_cumulative([task_iv[j] for j in demand_by_task], list(demand_by_task.values()),
                                  int(inst.robot_caps[:, c].sum()))
     model.minimize(makespan)
-    return _Model(model, start, choice, makespan)
+    return _Model(model, start, member, choice, makespan)
+
+
+def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
+    """The formulation for large teams, with no coalition listed: a boolean per robot and
+    task (in its subteam or not), the coverage of Eqs. 10-11 as linear constraints (a
+    holder of each needed capability, payloads adding up), per-robot optional intervals
+    with no-overlap, precedence, makespan, and the redundant robots-in-use cumulative.
+    Subteams may hold more robots than needed; the solution is trimmed to minimal ones."""
+    model = cp_model.CpModel()
+    todo, dur = h.todo, h.dur
+    start = {j: model.new_int_var(h.head[j], h.upper - h.tail[j], f"S_{j}") for j in todo}
+    makespan = model.new_int_var(h.lower, h.upper, "C")
+    pay_int = np.round(inst.robot_payload * 1000).astype(np.int64)
+    per_robot: list[list[cp_model.IntervalVar]] = [[] for _ in inst.robots]
+    member: dict[int, dict[int, cp_model.IntVar]] = {}
+    counts = []
+    for j in todo:
+        need = inst.task_caps[j]
+        useful = np.flatnonzero((inst.robot_caps & need).any(axis=1) | (inst.tasks[j].payload > TOLERANCE))
+        member[j] = {int(r): model.new_bool_var(f"y_{r}_{j}") for r in useful}
+        for c in np.flatnonzero(need):  # Eq. 10
+            model.add_bool_or([member[j][r] for r in member[j] if inst.robot_caps[r, c]])
+        need_pay = int(np.ceil(inst.tasks[j].payload * 1000 - TOLERANCE))
+        if need_pay > 0:  # Eq. 11
+            model.add(sum(int(pay_int[r]) * y for r, y in member[j].items()) >= need_pay)
+        for r, y in member[j].items():
+            per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
+            if h.free_at[r] > h.head[j]:
+                model.add(start[j] >= h.free_at[r]).only_enforce_if(y)
+        n_j = model.new_int_var(1, len(member[j]), f"n_{j}")
+        model.add(n_j == sum(member[j].values()))
+        counts.append(n_j)
+        for p in inst.prerequisites[j]:
+            if p in dur:
+                model.add(start[j] >= start[p] + dur[p])
+        model.add(makespan >= start[j] + dur[j])
+    for intervals in per_robot:
+        if len(intervals) > 1:
+            model.add_no_overlap(intervals)
+    model.add_cumulative([model.new_fixed_size_interval_var(start[j], dur[j], f"I_{j}") for j in todo], counts,
+                         inst.num_robots)
+    model.minimize(makespan)
+    return _Model(model, start, member, None, makespan)
 
 
 def _add_hint(inst: Instance, h: _Horizon, m: _Model, hint: Schedule) -> None:
@@ -223,9 +292,13 @@ def _add_hint(inst: Instance, h: _Horizon, m: _Model, hint: Schedule) -> None:
             continue
         m.model.add_hint(m.start[j], min(max(h.ticks(a.start), h.head[j]), h.upper - h.tail[j]))
         robots = {inst.robot_index[r] for r in a.robots}
-        pick = next((k for k, team in enumerate(h.teams[j]) if set(team) <= robots), 0)
-        for k, x in enumerate(m.choice[j]):
-            m.model.add_hint(x, k == pick)
+        if h.teams is not None and m.choice is not None:
+            pick = next((k for k, team in enumerate(h.teams[j]) if set(team) <= robots), 0)
+            for k, x in enumerate(m.choice[j]):
+                m.model.add_hint(x, k == pick)
+        else:
+            for r, y in m.member[j].items():
+                m.model.add_hint(y, r in robots)
     m.model.add_hint(m.makespan, h.upper)
 
 
@@ -236,9 +309,11 @@ def _solution(inst: Instance, state: State, h: _Horizon, m: _Model, solver: cp_m
             s0 = float(state.task_start[j])
             out.append(Assignment(t.id, tuple(inst.robots[r].id for r in state.task_team[j]), s0, s0 + t.duration))
             continue
-        k = next(k for k, x in enumerate(m.choice[j]) if solver.boolean_value(x))
+        team = [r for r, y in m.member[j].items() if solver.boolean_value(y)]
+        if h.teams is None:  # boolean model: drop members the subteam does not need
+            team = prune(team, inst.robot_caps, inst.robot_payload, inst.task_caps[j], t.payload)
         s0 = solver.value(m.start[j]) / h.scale
-        out.append(Assignment(t.id, tuple(inst.robots[r].id for r in h.teams[j][k]), s0, s0 + t.duration))
+        out.append(Assignment(t.id, tuple(inst.robots[r].id for r in sorted(team)), s0, s0 + t.duration))
     return left_shift(inst, Schedule.from_assignments(inst.name, "exact", out), state)
 
 
@@ -250,11 +325,17 @@ def solve_exact(
     workers: int = 8,
     hint: Schedule | None = None,
     seed: int = 0,
+    formulation: str = "auto",
 ) -> ExpertResult:
-    """Minimise the makespan of ``inst`` (from ``state`` when given) with CP-SAT."""
+    """Minimise the makespan of ``inst`` (from ``state`` when given) with CP-SAT.
+
+    ``formulation``: "coalition" lists the minimal covering subteams of each task (fast
+    for small teams), "boolean" uses a robot-task boolean per pair (any team size),
+    "auto" (default) takes the coalition model when the team has at most
+    MAX_ENUMERATED robots and the coalitions number at most COALITION_LIMIT."""
+    if formulation not in ("auto", "coalition", "boolean"):
+        raise ExpertError(f"unknown formulation {formulation!r} (auto | coalition | boolean)")
     t_start = time.perf_counter()
-    if inst.num_robots > MAX_ENUMERATED:
-        raise ExpertError(f"the exact expert handles at most {MAX_ENUMERATED} robots, got {inst.num_robots}")
     state = State.initial(inst) if state is None else state.copy()
     state.refresh()
     hint = left_shift(inst, heuristic_schedule(inst, state) if hint is None else hint, state)
@@ -262,8 +343,8 @@ def solve_exact(
     if not todo:
         sched = schedule_from_state(state, "exact")
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
-    h = _horizon(inst, state, todo, hint)
-    m = _build_model(inst, h)
+    h = _horizon(inst, state, todo, hint, coalitions=formulation != "boolean")
+    m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
     _add_hint(inst, h, m, hint)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))

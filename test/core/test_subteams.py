@@ -1,0 +1,99 @@
+"""Constructive subteams (no enumeration) against the brute-force enumeration of every
+subset on small teams: what they build covers (Eqs. 10-11) and is inclusion-minimal,
+they find a subteam exactly when one exists, and tasks needing 17+ robots or teams of 40
+are served."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lvws_ros.core.datasets import subteam_heavy_instance
+from lvws_ros.core.executor import simulate
+from lvws_ros.core.problem import Instance, Robot, Task
+from lvws_ros.core.schedule import check_schedule
+from lvws_ros.core.subteams import cover_with, covers, lightest_cover, minimal_subteams, random_cover
+from lvws_ros.registry import make_policy
+
+
+@st.composite
+def teams(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    n, k = draw(st.integers(1, 9)), draw(st.integers(1, 4))
+    caps = np.array(draw(st.lists(st.lists(st.booleans(), min_size=k, max_size=k), min_size=n, max_size=n)))
+    payloads = np.array(draw(st.lists(st.sampled_from([0.5, 1.0, 2.0, 3.0, 5.0, 8.0]), min_size=n, max_size=n)))
+    need = np.array(draw(st.lists(st.booleans(), min_size=k, max_size=k)))
+    need[draw(st.integers(0, k - 1))] = True
+    return caps, payloads, need, float(draw(st.sampled_from([0.0, 1.0, 2.5, 4.0, 7.0, 12.0, 30.0])))
+
+
+@settings(max_examples=400, deadline=None, derandomize=True)
+@given(case=teams(), seed=st.integers(0, 1000))
+def test_constructive_subteams_cover_and_are_minimal(case, seed):
+    caps, payloads, need, need_payload = case
+    minimal = set(minimal_subteams(caps, payloads, need, need_payload))  # brute force over 2^n subsets
+    built = [lightest_cover(caps, payloads, need, need_payload),
+             random_cover(caps, payloads, need, need_payload, np.random.default_rng(seed))]
+    for team in built:
+        assert (team is None) == (not minimal)  # found exactly when one exists
+        if team is not None:
+            assert covers(caps[list(team)], payloads[list(team)], need, need_payload)
+            assert team in minimal  # inclusion-minimal
+    for member in range(len(caps)):
+        team = cover_with(caps, payloads, need, need_payload, member)
+        if team is not None:
+            assert member in team and team in minimal
+
+
+def test_the_lightest_cover_is_the_lightest_minimal_subteam_almost_always():
+    """GRP's subteam against the exhaustive minimum on 1000 random small cases (seed 0)."""
+    rng = np.random.default_rng(0)
+    found = optimal = 0
+    for _ in range(1000):
+        n, k = int(rng.integers(1, 10)), int(rng.integers(1, 5))
+        caps, payloads = rng.random((n, k)) < 0.5, rng.choice([0.5, 1.0, 2.0, 3.0, 5.0, 8.0], size=n)
+        need = rng.random(k) < 0.5
+        need[rng.integers(k)] = True
+        need_payload = float(rng.choice([0.0, 1.0, 2.5, 4.0, 7.0, 12.0]))
+        minimal = minimal_subteams(caps, payloads, need, need_payload)
+        if not minimal:
+            continue
+        team = lightest_cover(caps, payloads, need, need_payload)
+        assert team is not None
+        found += 1
+        optimal += float(payloads[list(team)].sum()) <= min(float(payloads[list(t)].sum()) for t in minimal) + 1e-9
+    assert optimal >= 0.95 * found, (optimal, found)
+
+
+def test_a_task_needing_seventeen_robots_and_forty_robot_teams_are_scheduled_by_every_policy():
+    robots = tuple(Robot(f"r{i}", (1, int(i % 2 == 0)), 1.0) for i in range(40))
+    tasks = (Task("big", (1, 0), 17.0, 3.0), Task("wide", (1, 1), 12.0, 2.0, ("big",)),
+             Task("small", (0, 1), 1.0, 1.0))
+    inst = Instance("fleet", ("lift", "drive"), robots, tasks)
+    for name in ("grp", "rand", "rand_subteam", "exact", "lvws", "dbgm", "lvws_rollout"):
+        sched = simulate(inst, make_policy(name, **({"workers": 2, "time_limit": 30} if name == "exact" else {})))
+        assert check_schedule(inst, sched.schedule) == [], name
+        assert len(sched.schedule.by_task()["big"].robots) == 17, name
+
+
+def test_the_expert_beyond_sixteen_robots_is_valid_and_never_worse_than_grp():
+    from lvws_ros.policies.exact import solve_exact
+
+    inst = subteam_heavy_instance(np.random.default_rng([3, 20, 40]), 20, 40, "20r-40t-heavy")
+    grp = simulate(inst, make_policy("grp")).schedule
+    res = solve_exact(inst, workers=2, time_limit=20)
+    assert res.schedule is not None and check_schedule(inst, res.schedule) == []
+    assert res.makespan is not None and res.makespan <= grp.makespan + 1e-9
+    assert res.bound <= res.makespan + 1e-9 and (res.status == "optimal") == (res.gap == 0.0)
+
+
+def test_both_expert_formulations_agree_on_small_instances():
+    from lvws_ros.core.datasets import DATASETS, dataset_instance
+    from lvws_ros.policies.exact import solve_exact
+
+    for k in range(800, 804):
+        inst = dataset_instance(DATASETS["I"], k, 0)
+        a = solve_exact(inst, workers=2, formulation="coalition")
+        b = solve_exact(inst, workers=2, formulation="boolean", time_limit=30)
+        assert a.proven and b.proven and a.makespan == b.makespan
+        assert b.schedule is not None and check_schedule(inst, b.schedule) == []
