@@ -3,7 +3,9 @@
 * matching decision time (greedy, Eqs. 7-11) for N x M free robots x ready tasks;
 * the exact expert on Dataset I test instances: share proven optimal, solve times;
 * the baselines' suboptimality on the Dataset I test split beside the paper's figures;
-* Fig. 5: LVWS decision rate and accumulated runtime for N robots x M tasks (PNG).
+* Fig. 5: LVWS decision rate and accumulated runtime for N robots x M tasks (PNG);
+* scale (:mod:`lvws_ros.cli.bench_scale`): whole schedules at 100 x 500 and 1000 x 5000 on
+  our generator and a subteam-heavy family, node decision latency, the expert on large teams.
 """
 
 from __future__ import annotations
@@ -125,6 +127,7 @@ def bench_fig5(model_path: str | None, seed: int, out_png: str, sizes_n: Sequenc
     import matplotlib.pyplot as plt
     import torch
 
+    from lvws_ros.cli.bench_scale import make_instance
     from lvws_ros.core.datasets import random_instance
     from lvws_ros.core.executor import simulate
     from lvws_ros.learning.policies import LVWSPolicy
@@ -133,21 +136,24 @@ def bench_fig5(model_path: str | None, seed: int, out_png: str, sizes_n: Sequenc
     # torch's first forward passes allocate and pick kernels; time the steady state, as a
     # scheduler that runs for a whole shift sees it
     simulate(random_instance(np.random.default_rng([seed, 0]), 10, 20, "warm-up", num_capabilities=3), policy)
-    print(f"\n## Fig. 5: LVWS decision rate and accumulated runtime (seed {seed}, {torch.get_num_threads()} torch "
-          "threads, after one untimed warm-up schedule)")
-    print("| N | M | decisions | decision rate Hz | accumulated runtime s | makespan |")
-    print("|---|---|---|---|---|---|")
     rate: dict[int, list[float]] = {}
     total: dict[int, list[float]] = {}
-    for n in sizes_n:
-        for m in sizes_m:
-            inst = random_instance(np.random.default_rng([seed, n, m]), n, m, f"{n}r-{m}t", num_capabilities=3)
-            sched = simulate(inst, policy).schedule
-            hz = sched.decisions / sched.compute_seconds
-            rate.setdefault(n, []).append(hz)
-            total.setdefault(n, []).append(sched.compute_seconds)
-            print(f"| {n} | {m} | {sched.decisions} | {hz:.2f} | {sched.compute_seconds:.2f} | {sched.makespan:g} |",
-                  flush=True)
+    for family in ("ours", "subteam-heavy"):
+        print(f"\n## Fig. 5 ({family} instances): LVWS decision rate and accumulated runtime (seed {seed}, "
+              f"{torch.get_num_threads()} torch threads, after one untimed warm-up schedule)")
+        print("| N | M | decisions | decision rate Hz | accumulated runtime s | makespan |")
+        print("|---|---|---|---|---|---|")
+        for n in sizes_n:
+            for m in sizes_m:
+                inst = (random_instance(np.random.default_rng([seed, n, m]), n, m, f"{n}r-{m}t", num_capabilities=3)
+                        if family == "ours" else make_instance(family, n, m, seed))
+                sched = simulate(inst, policy).schedule
+                hz = sched.decisions / sched.compute_seconds
+                if family == "ours":  # the plot: our generator, as before
+                    rate.setdefault(n, []).append(hz)
+                    total.setdefault(n, []).append(sched.compute_seconds)
+                print(f"| {n} | {m} | {sched.decisions} | {hz:.2f} | {sched.compute_seconds:.2f} | "
+                      f"{sched.makespan:g} |", flush=True)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     for n in sizes_n:
         ax1.plot(sizes_m, rate[n], marker="o", label=f"N = {n}")
@@ -249,7 +255,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-limit", type=float, default=60.0)
     parser.add_argument("--model", default=None, help="LVWS checkpoint for Fig. 5 (default: the shipped one)")
     parser.add_argument("--fig5-png", default="docs/fig5.png")
-    parser.add_argument("--only", choices=["core", "fig5", "runtime"], default=None)
+    parser.add_argument("--only", choices=["core", "fig5", "runtime", "scale"], default=None)
+    parser.add_argument("--scale-limit", type=float, default=600.0, help="wall seconds per whole-schedule run")
     args = parser.parse_args(argv)
     print(f"# lvws_ros benchmarks — {machine()}")
     if args.only in (None, "core"):
@@ -259,6 +266,10 @@ def main(argv: list[str] | None = None) -> int:
         bench_baselines(args.baseline_count, args.seed, args.workers, args.time_limit)
     if args.only in (None, "fig5"):
         bench_fig5(args.model, args.seed, args.fig5_png)
+    if args.only in (None, "scale"):
+        from lvws_ros.cli.bench_scale import main as bench_scale
+
+        bench_scale(args.seed, args.scale_limit)
     if args.only in (None, "runtime"):
         bench_runtime()
     return 0

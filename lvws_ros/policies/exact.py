@@ -188,6 +188,19 @@ class _Model:
     makespan: cp_model.IntVar
 
 
+def _sequencing(model: cp_model.CpModel, inst: Instance, h: _Horizon, start: dict[int, cp_model.IntVar],
+                makespan: cp_model.IntVar, per_robot: list[list[cp_model.IntervalVar]]) -> None:
+    """What both formulations share: precedence, the makespan, one task at a time per robot."""
+    for j in h.todo:
+        for p in inst.prerequisites[j]:
+            if p in h.dur:
+                model.add(start[j] >= start[p] + h.dur[p])
+        model.add(makespan >= start[j] + h.dur[j])
+    for intervals in per_robot:
+        if len(intervals) > 1:
+            model.add_no_overlap(intervals)
+
+
 def _build_model(inst: Instance, h: _Horizon) -> _Model:
     """Start variables, one exactly-one choice of minimal subteam per task, per-robot
     no-overlap, precedence, makespan, and the redundant cumulatives."""
@@ -222,13 +235,7 @@ def _build_model(inst: Instance, h: _Horizon) -> _Model:
             holders = [int(inst.robot_caps[list(team), c].sum()) for team in teams[j]]
             if any(holders):
                 cap_use[c][j] = _demand(model, holders, choice[j], f"c{c}_{j}")
-        for p in inst.prerequisites[j]:
-            if p in dur:
-                model.add(start[j] >= start[p] + dur[p])
-        model.add(makespan >= start[j] + dur[j])
-    for intervals in per_robot:
-        if len(intervals) > 1:
-            model.add_no_overlap(intervals)
+    _sequencing(model, inst, h, start, makespan, per_robot)
     ivs = [task_iv[j] for j in todo]
     model.add_cumulative(ivs, [robot_count[j] for j in todo], inst.num_robots)
     model.add_cumulative(ivs, [payload_use[j] for j in todo], int(pay_int.sum()))
@@ -270,13 +277,7 @@ def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
         n_j = model.new_int_var(1, len(member[j]), f"n_{j}")
         model.add(n_j == sum(member[j].values()))
         counts.append(n_j)
-        for p in inst.prerequisites[j]:
-            if p in dur:
-                model.add(start[j] >= start[p] + dur[p])
-        model.add(makespan >= start[j] + dur[j])
-    for intervals in per_robot:
-        if len(intervals) > 1:
-            model.add_no_overlap(intervals)
+    _sequencing(model, inst, h, start, makespan, per_robot)
     model.add_cumulative([model.new_fixed_size_interval_var(start[j], dur[j], f"I_{j}") for j in todo], counts,
                          inst.num_robots)
     model.minimize(makespan)

@@ -1,0 +1,179 @@
+"""Scale benchmarks (``python -m lvws_ros.cli.bench --only scale``): figures printed,
+nothing asserted.
+
+* whole-schedule time, peak memory and validity of every policy at 100 x 500 and
+  1000 x 5000 (robots x tasks) on our generator and on the subteam-heavy family, each run
+  in a child process of its own (peak RSS per run, a wall-time limit per run);
+* scheduler-node decision latency p50/p99 at 100 x 500: the node's work without DDS
+  (message -> snapshot conversion of both messages, OnlineScheduler.decide) at each
+  decision step of a whole run;
+* the exact expert on 24-40 robots x 30 tasks (subteam-heavy): status, bound and gap in 60 s.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+FAMILIES = ("ours", "subteam-heavy")
+POLICIES = ("grp", "rand", "rand_subteam", "dbgm", "lvws", "lvws_rollout")
+
+
+def make_instance(family: str, n: int, m: int, seed: int) -> Any:
+    from lvws_ros.core.datasets import random_instance, subteam_heavy_instance
+
+    rng = np.random.default_rng([seed, n, m])
+    if family == "ours":
+        return random_instance(rng, n, m, f"ours-{n}r-{m}t", num_capabilities=3)
+    return subteam_heavy_instance(rng, n, m, f"heavy-{n}r-{m}t")
+
+
+def one_run(policy: str, family: str, n: int, m: int, seed: int) -> dict[str, Any]:
+    """One whole schedule in this process (the child's side of :func:`run_in_child`)."""
+    from lvws_ros.core.executor import simulate
+    from lvws_ros.core.schedule import check_schedule
+    from lvws_ros.registry import make_policy
+
+    inst = make_instance(family, n, m, seed)
+    pol = make_policy(policy, seed=seed)
+    if policy in ("lvws", "dbgm", "lvws_rollout"):  # torch's first passes: warm up on a small instance
+        simulate(make_instance(family, 10, 20, seed + 1), pol)
+    t0 = time.perf_counter()
+    res = simulate(inst, pol)
+    seconds = time.perf_counter() - t0
+    return {"seconds": seconds, "decisions": res.schedule.decisions, "makespan": res.schedule.makespan,
+            "valid": not check_schedule(inst, res.schedule),
+            "peak_mib": _peak_mib()}
+
+
+def _peak_mib() -> float:
+    """This process's peak resident memory (VmHWM; ru_maxrss would carry over the
+    forking parent's peak across exec)."""
+    for line in open("/proc/self/status").read().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def run_in_child(policy: str, family: str, n: int, m: int, seed: int, limit: float) -> dict[str, Any]:
+    cmd = [sys.executable, "-m", "lvws_ros.cli.bench_scale", "--one", policy, family, str(n), str(m), str(seed)]
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=limit)
+    except subprocess.TimeoutExpired:
+        return {"error": f"not finished within {limit:g} s"}
+    if res.returncode != 0:
+        return {"error": (res.stderr.strip().splitlines() or ["?"])[-1][:120]}
+    out: dict[str, Any] = json.loads(res.stdout.strip().splitlines()[-1])
+    return out
+
+
+def bench_whole_schedules(seed: int, limit: float) -> None:
+    print(f"\n## Whole schedules (seed {seed}; each run in its own process, limit {limit:g} s; peak = max RSS)")
+    print("| family | N x M | policy | seconds | decisions | makespan | valid | peak MiB |")
+    print("|---|---|---|---|---|---|---|---|")
+    for family in FAMILIES:
+        for n, m in ((100, 500), (1000, 5000)):
+            for policy in POLICIES:
+                if policy == "lvws_rollout" and n > 100:
+                    print(f"| {family} | {n} x {m} | {policy} | not run: about 2(candidates) x a whole LVWS "
+                          "schedule per decision | | | | |")
+                    continue
+                r = run_in_child(policy, family, n, m, seed, limit)
+                if "error" in r:
+                    print(f"| {family} | {n} x {m} | {policy} | {r['error']} | | | | |", flush=True)
+                else:
+                    print(f"| {family} | {n} x {m} | {policy} | {r['seconds']:.2f} | {r['decisions']} | "
+                          f"{r['makespan']:g} | {'yes' if r['valid'] else 'NO'} | {r['peak_mib']:.0f} |", flush=True)
+
+
+def node_latency(policy: str, family: str, n: int, m: int, seed: int) -> list[float]:
+    """Seconds per decision of the scheduler node's work (both messages converted to
+    snapshots, OnlineScheduler.decide), at each decision step of a whole run."""
+    from lvws_ros.core.executor import State, TaskStatus
+    from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot
+    from lvws_ros.registry import make_policy
+    from lvws_ros.ros import convert
+
+    inst = make_instance(family, n, m, seed)
+    online = OnlineScheduler(make_policy(policy, seed=seed), ack_timeout=1e9)
+    state = State.initial(inst)
+    names = tuple(inst.capabilities)
+    lat: list[float] = []
+    while not state.done():
+        free = state.robot_available()
+        team = TeamSnapshot(state.time, names, tuple(
+            RobotInfo(r.id, "x", bool(free[i]), r.capabilities, r.payload, "", float(state.busy_remaining()[i]))
+            for i, r in enumerate(inst.robots)))
+        graph = GraphSnapshot(state.time, names, tuple(
+            TaskInfo(t.id, int(state.task_status[j]), t.capabilities, t.payload, t.duration, t.after,
+                     tuple(inst.robots[r].id for r in state.task_team[j]),
+                     None if np.isnan(state.task_start[j]) else float(state.task_start[j]))
+            for j, t in enumerate(inst.tasks)))
+        team_msg, graph_msg = convert.team_to_msg(team), convert.graph_to_msg(graph)
+        t0 = time.perf_counter()
+        online.offer_team(convert.team_from_msg(team_msg))
+        online.offer_graph(convert.graph_from_msg(graph_msg))
+        d = online.decide()
+        lat.append(time.perf_counter() - t0)
+        for tid, robots in d.assignments if d else ():
+            state.start(inst.task_index[tid], [inst.robot_index[r] for r in robots])
+        online.pending.clear()  # the world took them: the next snapshot says so
+        nxt = state.next_event_time()
+        if nxt is None:
+            raise RuntimeError(f"{policy}: no progress at t={state.time}")
+        state.time = nxt
+        state.refresh()
+        if (state.task_status == TaskStatus.ASSIGNED).sum() == 0 and state.done():
+            break
+    return lat
+
+
+def bench_node_latency(seed: int) -> None:
+    print(f"\n## Scheduler-node decision latency at 100 x 500 (seed {seed}; conversion of both messages + "
+          "OnlineScheduler.decide, no DDS)")
+    print("| family | policy | decisions | p50 ms | p99 ms | max ms |")
+    print("|---|---|---|---|---|---|")
+    for family in FAMILIES:
+        for policy in ("grp", "lvws"):
+            lat = [1000 * x for x in node_latency(policy, family, 100, 500, seed)]
+            print(f"| {family} | {policy} | {len(lat)} | {statistics.median(lat):.1f} | "
+                  f"{float(np.percentile(lat, 99)):.1f} | {max(lat):.1f} |", flush=True)
+
+
+def bench_exact_large_teams(seed: int, time_limit: float = 60.0, workers: int = 2) -> None:
+    from lvws_ros.core.executor import simulate
+    from lvws_ros.core.schedule import check_schedule
+    from lvws_ros.policies.exact import solve_exact
+    from lvws_ros.registry import make_policy
+
+    print(f"\n## Exact expert on large teams (subteam-heavy, 30 tasks, seed {seed}, {workers} workers, "
+          f"limit {time_limit:g} s)")
+    print("| robots | GRP makespan | exact makespan | status | bound | gap % | seconds | valid |")
+    print("|---|---|---|---|---|---|---|---|")
+    for n in (24, 32, 40):
+        inst = make_instance("subteam-heavy", n, 30, seed)
+        grp = simulate(inst, make_policy("grp")).schedule.makespan
+        res = solve_exact(inst, time_limit=time_limit, workers=workers, seed=seed)
+        assert res.schedule is not None
+        print(f"| {n} | {grp:g} | {res.makespan:g} | {res.status} | {res.bound:g} | {100 * res.gap:.1f} | "
+              f"{res.seconds:.1f} | {'yes' if not check_schedule(inst, res.schedule) else 'NO'} |", flush=True)
+
+
+def main(seed: int = 0, limit: float = 600.0) -> None:
+    bench_exact_large_teams(seed)
+    bench_node_latency(seed)
+    bench_whole_schedules(seed, limit)
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["--one"]:
+        policy, family, n, m, seed = sys.argv[2:7]
+        print(json.dumps(one_run(policy, family, int(n), int(m), int(seed))))
+    else:
+        main()
