@@ -154,13 +154,19 @@ class GATN(nn.Module):
         self.psi_out = nn.Sequential(nn.ReLU(), nn.Linear(self.cfg.mlp_hidden, self.cfg.mlp_hidden), nn.ReLU(),
                                      nn.Linear(self.cfg.mlp_hidden, 1))
 
-    def forward(self, batch: Batch) -> Tensor:
+    def forward(self, batch: Batch, rows: Tensor | None = None, cols: Tensor | None = None) -> Tensor:
+        """(B, N, M+1) rewards; with ``rows``/``cols`` (index tensors, one graph) only
+        the entries a decision reads, (1, len(rows), len(cols)): Eq. 6 for the free
+        robots x the ready tasks and the idle task, the encoders over whole graphs."""
         b, n = batch.robot_mask.shape
         full = torch.ones(b, n, n, dtype=torch.bool, device=batch.robots.device)  # Q = ones
         g_r, h_r = self.robot_encoder(batch.robots, full, batch.robot_mask)
         g_t, h_t = self.task_encoder(batch.tasks, batch.task_adjacency, batch.task_mask)
+        pairs = batch.pairs
+        if rows is not None and cols is not None:
+            h_r, h_t, pairs = h_r[:, rows], h_t[:, cols], pairs[:, rows][:, :, cols]
         z = (self.psi_r(h_r).unsqueeze(2) + self.psi_t(h_t).unsqueeze(1)
-             + self.psi_g(torch.cat([g_r, g_t], dim=-1))[:, None, None, :] + self.psi_p(batch.pairs))
+             + self.psi_g(torch.cat([g_r, g_t], dim=-1))[:, None, None, :] + self.psi_p(pairs))
         return self.psi_out(z).squeeze(-1)
 
 
@@ -203,7 +209,16 @@ def collate(graphs: Sequence[GraphFeatures]) -> Batch:
                  torch.from_numpy(tmask), torch.from_numpy(adj), torch.from_numpy(idle), torch.from_numpy(pairs))
 
 
-def reward_matrix(model: GATN, features: GraphFeatures) -> np.ndarray:
-    """One forward pass for one decision step: the N x (M+1) reward matrix."""
+def reward_matrix(model: GATN, features: GraphFeatures, rows: Sequence[int] | None = None,
+                  cols: Sequence[int] | None = None) -> np.ndarray:
+    """One forward pass for one decision step: the N x (M+1) reward matrix. With
+    ``rows`` and ``cols`` only those entries are computed (the rest is NaN): Eq. 6 for
+    what the matching reads."""
     with torch.inference_mode():
-        return model(collate([features]))[0].numpy().astype(np.float64)
+        batch = collate([features])
+        if rows is None or cols is None:
+            return model(batch)[0].numpy().astype(np.float64)
+        r = np.full((features.robots.shape[0], features.tasks.shape[0]), np.nan)
+        part = model(batch, torch.as_tensor(list(rows)), torch.as_tensor(list(cols)))[0].numpy()
+        r[np.ix_(list(rows), list(cols))] = part
+        return r

@@ -55,10 +55,13 @@ class LVWSPolicy:
             self._pairs = (instance, pair_features(instance))
 
     def rewards(self, state: State) -> np.ndarray:
-        """R (N x (M+1)) of Eq. 6 for this decision step: one GATN forward pass."""
+        """R (N x (M+1)) of Eq. 6 for this decision step: one GATN forward pass, the
+        reward MLP only on the free robots x the ready tasks and the idle task (the
+        entries the matching reads; the others are NaN)."""
         self.reset(state.instance)
         assert self._pairs is not None
-        return reward_matrix(self.model, encode_state(state, self._pairs[1]))
+        return reward_matrix(self.model, encode_state(state, self._pairs[1]), state.free_robots(),
+                             [*state.ready_tasks(), state.instance.num_tasks])
 
     def match(self, state: State, r: np.ndarray, free: list[int], idle_bias: float | None = None) -> Decision:
         """Eqs. 7-11 on the rows of ``free`` and the ready tasks plus the idle column."""
@@ -103,7 +106,7 @@ class DBGMPolicy:
         free, ready = state.free_robots(), state.ready_tasks()
         if not free or not ready:
             return Decision((), tuple(free))
-        r = reward_matrix(self.model, encode_state(state))
+        r = reward_matrix(self.model, encode_state(state), free, ready)
         out: list[tuple[int, tuple[int, ...]]] = []
         pairs = [(r[i, j], i, j) for i in free for j in ready
                  if covers(inst.robot_caps[[i]], inst.robot_payload[[i]], inst.task_caps[j], inst.tasks[j].payload)]

@@ -83,7 +83,9 @@ def _tail(path: Path, lines: int = 15) -> str:
 def _commands(bag: Path, *, policy: str, seed: int, model_path: str, rate: float, config: str,
               params_file: str | None, summary: Path, gif: Path | None, sync: bool) -> dict[str, list[str]]:
     """The three children's command lines, recorder first, simulator last."""
-    sched_params = ["-p", f"policy:={policy}", "-p", f"seed:={seed}", "-p", "use_sim_time:=true"]
+    # the world and the recorder: neither may miss the first decision
+    sched_params = ["-p", f"policy:={policy}", "-p", f"seed:={seed}", "-p", "use_sim_time:=true",
+                    "-p", "expect_subscribers:=2"]
     if model_path:
         sched_params += ["-p", f"model_path:={model_path}"]
     if params_file:

@@ -8,7 +8,8 @@ whenever a robot becomes available or a task becomes ready. A thin shell over
 a second and on every error.
 
 Parameters: policy (lvws | lvws_rollout | dbgm | grp | rand | rand_subteam | exact;
-default lvws), model_path ("" = the shipped checkpoint), seed, ack_timeout, use_sim_time.
+default lvws), model_path ("" = the shipped checkpoint), seed, ack_timeout, expect_subscribers (the first
+decision waits until this many nodes subscribe to the assignments, default 0), use_sim_time.
 """
 
 from __future__ import annotations
@@ -43,7 +44,8 @@ DEFAULT_POLICY = "lvws"
 # name -> (type, default); the ones a params file may set
 PARAMETERS: dict[str, tuple[type, object]] = {"policy": (str, DEFAULT_POLICY), "model_path": (str, ""),
                                               "seed": (int, 0), "ack_timeout": (float, 5.0),
-                                              "use_sim_time": (bool, False)}
+                                              "expect_subscribers": (int, 0), "use_sim_time": (bool, False)}
+SUBSCRIBER_WAIT = 20.0  # wall seconds the first decision waits for expect_subscribers
 SETTLE_SECONDS = 0.2  # wall time to wait for the matching team/graph message
 
 
@@ -89,6 +91,10 @@ class SchedulerNode(Node):
         model_path = str(self.declare_parameter("model_path", "").value)
         self.seed = int(self.declare_parameter("seed", 0).value)
         ack_timeout = float(self.declare_parameter("ack_timeout", 5.0).value)
+        # the first decision waits (at most SUBSCRIBER_WAIT) until this many nodes (a recorder,
+        # the world) subscribe to lvws/assignments, so none of them misses it
+        self.expect_subscribers = int(self.declare_parameter("expect_subscribers", 0).value)
+        self.started_at = time.monotonic()
         if self.policy_name not in POLICY_NAMES:
             raise LvwsError(f"parameter policy: unknown {self.policy_name!r}; one of {', '.join(POLICY_NAMES)}")
         options = {"model_path": model_path} if self.policy_name in LEARNED_POLICIES else {}
@@ -153,7 +159,16 @@ class SchedulerNode(Node):
             self.unsynced_since = None
             self.guarded(self.step)
 
+    def audience_ready(self) -> bool:
+        """Whether the expected subscribers of lvws/assignments are there (or the wait is over)."""
+        if self.core.step > 0 or self.pub.get_subscription_count() >= self.expect_subscribers:
+            return True
+        return time.monotonic() - self.started_at > SUBSCRIBER_WAIT
+
     def step(self) -> None:
+        if not self.audience_ready():
+            self.unsynced_since = time.monotonic()  # on_settle tries again
+            return
         try:
             decision = self.core.decide()
         except LvwsError as exc:
