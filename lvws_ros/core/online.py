@@ -30,6 +30,7 @@ What the node should report (restarts, releases, untrusted readiness) collects i
 
 from __future__ import annotations
 
+import graphlib
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -112,12 +113,19 @@ def check_team(snap: TeamSnapshot) -> None:
     """InstanceError naming the TeamState field when the snapshot cannot be used."""
     _finite(snap.stamp, "TeamState header.stamp", high=math.inf)
     k = len(snap.capability_names)
+    if k < 1 or not snap.robots:
+        raise InstanceError("TeamState: needs capability_names and at least one robot")
+    ids = [r.id for r in snap.robots]
+    if len(set(ids)) != len(ids):
+        raise InstanceError(f"TeamState robots: duplicate ids {sorted({i for i in ids if ids.count(i) > 1})}")
     for n, r in enumerate(snap.robots):
         where = f"TeamState robots[{n}] ({r.id!r})"
         if not r.id:
             raise InstanceError(f"TeamState robots[{n}].id: empty")
         _bits(r.capabilities, k, f"{where}.capabilities")
         _finite(r.payload, f"{where}.payload")
+        if r.payload <= 0:
+            raise InstanceError(f"{where}.payload: must be > 0, got {r.payload!r}")
 
 
 def check_graph(snap: GraphSnapshot) -> None:
@@ -125,20 +133,30 @@ def check_graph(snap: GraphSnapshot) -> None:
     _finite(snap.stamp, "TaskGraph header.stamp", high=math.inf)
     k = len(snap.capability_names)
     ids = {t.id for t in snap.tasks}
+    if len(ids) != len(snap.tasks) or "" in ids:
+        raise InstanceError("TaskGraph tasks: ids must be unique and non-empty")
     for n, t in enumerate(snap.tasks):
         where = f"TaskGraph tasks[{n}] ({t.id!r})"
         if t.status not in set(TaskStatus):
             raise InstanceError(f"{where}.status: {t.status} is not one of "
                                 + ", ".join(f"{s.name}={s.value}" for s in TaskStatus))
         _bits(t.capabilities, k, f"{where}.capabilities")
+        if not any(t.capabilities):
+            raise InstanceError(f"{where}.capabilities: needs at least one capability")
         _finite(t.payload, f"{where}.payload")
         _finite(t.duration, f"{where}.duration")
+        if t.duration <= 0:
+            raise InstanceError(f"{where}.duration: must be > 0, got {t.duration!r}")
         unknown = [p for p in t.prerequisites if p not in ids]
         if unknown:
             raise InstanceError(f"{where}.prerequisites: unknown task id(s) {unknown}")
         for name, value in (("start_time", t.start), ("end_time", t.end)):
             if value is not None:
                 _finite(value, f"{where}.{name}", high=math.inf)
+    try:
+        list(graphlib.TopologicalSorter({t.id: t.prerequisites for t in snap.tasks}).static_order())
+    except graphlib.CycleError as exc:
+        raise InstanceError(f"TaskGraph prerequisites: cycle {' -> '.join(exc.args[1])}") from None
 
 
 def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online") -> Instance:
@@ -236,8 +254,7 @@ class OnlineScheduler:
         self.notices.append(f"{kind} stamp went back from {last:.3f} to {stamp:.3f} s: world restart assumed, "
                             f"stamp order reset, {len(self.pending)} pending assignment(s) released")
         self.pending.clear()
-        self.team = self.team if kind == "TaskGraph" else None
-        self.graph = self.graph if kind == "TeamState" else None
+        self.team, self.graph = None, None  # both are of the old world: wait for the new world's
         self._seen_free, self._seen_ready = frozenset(), frozenset()
         return True
 
@@ -295,10 +312,10 @@ class OnlineScheduler:
         ready = frozenset(inst.tasks[j].id for j in state.ready_tasks())
         due = bool(free - self._seen_free) or bool(ready - self._seen_ready)
         due |= not (state.task_status == TaskStatus.ASSIGNED).any()  # nothing runs: waiting would stall
-        self._seen_free, self._seen_ready = free, ready
         if not (due and free and ready):
+            self._seen_free, self._seen_ready = free, ready
             return None
-        decision = self.decide_state(state)
+        decision = self.decide_state(state)  # if it raises, the same state is due again
         for task, robots in decision.assignments:
             self.pending[task] = (robots, now)
         self._seen_free = free - {r for _, team in decision.assignments for r in team}

@@ -55,7 +55,7 @@ def shortfall(team_caps: npt.ArrayLike, team_payload: npt.ArrayLike, need_caps: 
     """
     missing = np.asarray(need_caps, dtype=bool) & ~np.asarray(team_caps, dtype=bool)
     short = np.asarray(need_payload, dtype=np.float64) - np.asarray(team_payload, dtype=np.float64)
-    return missing, np.where(short > TOLERANCE, short, 0.0)
+    return missing, np.where(short <= TOLERANCE, 0.0, short)  # NaN stays NaN: not covered
 
 
 def covered(team_caps: npt.ArrayLike, team_payload: npt.ArrayLike, need_caps: npt.ArrayLike,

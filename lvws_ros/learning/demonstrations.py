@@ -174,15 +174,15 @@ def _parts(d: Demo) -> tuple[np.ndarray, ...]:
 
 def save_demos(demos: Sequence[Demo], path: str | Path, meta: dict[str, Any] | None = None) -> None:
     """Write demonstrations as a data-only ``.npz`` (no pickle): each array kind is
-    concatenated over the demonstrations along its first axis, with the row counts."""
+    flattened and concatenated over the demonstrations, with each one's shape."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     arrays: dict[str, Any] = {}
     for k, name in enumerate(_ARRAYS):
         parts = [_parts(d)[k] for d in demos]
-        arrays[name] = np.concatenate(parts) if parts else np.zeros((0,))
-        arrays[f"{name}_rows"] = np.array([len(x) for x in parts], dtype=np.int64)
-        arrays[f"{name}_shape"] = np.array([x.shape[1:] for x in parts], dtype=np.int64).reshape(len(parts), -1)
+        ndim = parts[0].ndim if parts else 1
+        arrays[name] = np.concatenate([x.reshape(-1) for x in parts]) if parts else np.zeros(0, np.float32)
+        arrays[f"{name}_shape"] = np.array([x.shape for x in parts], dtype=np.int64).reshape(len(parts), ndim)
     header = json.dumps({"format": DEMOS_FORMAT, "meta": meta or {}, "count": len(demos)})
     tmp = p.with_name(p.name + ".tmp.npz")
     np.savez_compressed(tmp, header=np.array(header), **arrays)
@@ -195,16 +195,20 @@ def load_demos(path: str | Path) -> tuple[list[Demo], dict[str, Any]]:
     try:
         with np.load(p, allow_pickle=False) as data:
             header = json.loads(str(data["header"]))
-            if header.get("format") != DEMOS_FORMAT:
+            if not isinstance(header, dict) or header.get("format") != DEMOS_FORMAT:
                 raise ModelError(f"{p}: not an {DEMOS_FORMAT} file")
-            split = {}
+            count, meta = int(header["count"]), dict(header["meta"])
+            split: dict[str, list[np.ndarray]] = {}
             for name in _ARRAYS:
-                flat, rows, shapes = data[name], data[f"{name}_rows"], data[f"{name}_shape"]
-                ends = np.cumsum(rows)
-                split[name] = [flat[e - r:e].reshape((r, *shape)) for e, r, shape in zip(ends, rows, shapes,
+                flat, shapes = data[name], data[f"{name}_shape"]
+                if len(shapes) != count:
+                    raise ModelError(f"{p}: {name}: {len(shapes)} shapes for {count} demonstrations")
+                sizes = [int(np.prod(shape)) for shape in shapes]
+                ends = np.cumsum(sizes, dtype=np.int64)
+                split[name] = [flat[e - n:e].reshape(tuple(shape)) for e, n, shape in zip(ends, sizes, shapes,
                                                                                           strict=True)]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
         raise ModelError(f"{p}: not a readable {DEMOS_FORMAT} file ({type(exc).__name__}: {exc})") from None
     demos = [Demo(GraphFeatures(split["robots"][k], split["tasks"][k], split["task_adjacency"][k], split["pairs"][k]),
-                  split["expert"][k], split["mask"][k]) for k in range(header["count"])]
-    return demos, header["meta"]
+                  split["expert"][k], split["mask"][k]) for k in range(count)]
+    return demos, meta

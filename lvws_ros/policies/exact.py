@@ -36,7 +36,15 @@ from lvws_ros.core.executor import Decision, SimulationResult, State, TaskStatus
 from lvws_ros.core.matching import Match, check_shapes, match_reward
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
-from lvws_ros.core.subteams import MAX_ENUMERATED, TOLERANCE, BoolArray, FloatArray, minimal_subteams, prune
+from lvws_ros.core.subteams import (
+    MAX_ENUMERATED,
+    TOLERANCE,
+    BoolArray,
+    FloatArray,
+    covers,
+    minimal_subteams,
+    prune,
+)
 from lvws_ros.errors import ExpertError
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomSubteamPolicy
 
@@ -247,6 +255,19 @@ def _build_model(inst: Instance, h: _Horizon) -> _Model:
     return _Model(model, start, member, choice, makespan)
 
 
+def _payload_units(inst: Instance) -> tuple[np.ndarray, np.ndarray]:
+    """Payloads as integers for Eq. 11 in the boolean model, never accepting a subteam
+    that does not cover: exact when every payload is a multiple of 1/SCALES[-1]; else
+    robots rounded down and needs (less the tolerance) rounded up at 1e6."""
+    values = np.concatenate([inst.robot_payload, inst.task_payload])
+    scale, exact = _time_scale(values)
+    if exact:
+        return np.round(inst.robot_payload * scale).astype(np.int64), np.round(inst.task_payload * scale).astype(np.int64)
+    fine = 10**6
+    return (np.floor(inst.robot_payload * fine).astype(np.int64),
+            np.ceil((inst.task_payload - TOLERANCE) * fine).astype(np.int64))
+
+
 def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
     """The formulation for large teams, with no coalition listed: a boolean per robot and
     task (in its subteam or not), the coverage of Eqs. 10-11 as linear constraints (a
@@ -257,7 +278,7 @@ def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
     todo, dur = h.todo, h.dur
     start = {j: model.new_int_var(h.head[j], h.upper - h.tail[j], f"S_{j}") for j in todo}
     makespan = model.new_int_var(h.lower, h.upper, "C")
-    pay_int = np.round(inst.robot_payload * 1000).astype(np.int64)
+    pay_int, need_int = _payload_units(inst)
     per_robot: list[list[cp_model.IntervalVar]] = [[] for _ in inst.robots]
     member: dict[int, dict[int, cp_model.IntVar]] = {}
     counts = []
@@ -267,9 +288,8 @@ def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
         member[j] = {int(r): model.new_bool_var(f"y_{r}_{j}") for r in useful}
         for c in np.flatnonzero(need):  # Eq. 10
             model.add_bool_or([member[j][r] for r in member[j] if inst.robot_caps[r, c]])
-        need_pay = int(np.ceil(inst.tasks[j].payload * 1000 - TOLERANCE))
-        if need_pay > 0:  # Eq. 11
-            model.add(sum(int(pay_int[r]) * y for r, y in member[j].items()) >= need_pay)
+        if need_int[j] > 0:  # Eq. 11
+            model.add(sum(int(pay_int[r]) * y for r, y in member[j].items()) >= int(need_int[j]))
         for r, y in member[j].items():
             per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
             if h.free_at[r] > h.head[j]:
@@ -311,6 +331,8 @@ def _solution(inst: Instance, state: State, h: _Horizon, m: _Model, solver: cp_m
             out.append(Assignment(t.id, tuple(inst.robots[r].id for r in state.task_team[j]), s0, s0 + t.duration))
             continue
         team = [r for r, y in m.member[j].items() if solver.boolean_value(y)]
+        if not covers(inst.robot_caps[team], inst.robot_payload[team], inst.task_caps[j], t.payload):
+            raise ExpertError(f"task {t.id!r}: the solver's subteam does not cover it (payload rounding)")
         if h.teams is None:  # boolean model: drop members the subteam does not need
             team = prune(team, inst.robot_caps, inst.robot_payload, inst.task_caps[j], t.payload)
         s0 = solver.value(m.start[j]) / h.scale

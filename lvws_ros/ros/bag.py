@@ -117,6 +117,9 @@ def reindex(path: str | Path) -> tuple[int, int]:
     files = sorted(bag.glob("*.mcap")) if bag.is_dir() else []
     if len(files) != 1:
         raise BagError(f"{bag}: expected a bag folder with one .mcap file, found {[f.name for f in files]}")
+    orig = files[0].with_name(files[0].name + ".orig")
+    if orig.exists():
+        raise BagError(f"{orig}: exists (the bag was reindexed already); move it away to reindex again")
     schemas, channels, messages, _ = _recover(files[0])
     if not channels:
         raise BagError(f"{files[0]}: no complete channel record: nothing to recover")
@@ -138,7 +141,7 @@ def reindex(path: str | Path) -> tuple[int, int]:
         shutil.rmtree(tmp, ignore_errors=True)
         raise BagError(f"{bag}: cannot rebuild ({type(exc).__name__}: {exc})") from None
     writer.close()
-    files[0].rename(files[0].with_name(files[0].name + ".orig"))
+    files[0].rename(orig)
     (tmp / f"{tmp.name}.mcap").rename(bag / files[0].name)
     (bag / "metadata.yaml").write_text((tmp / "metadata.yaml").read_text().replace(f"{tmp.name}.mcap", files[0].name))
     shutil.rmtree(tmp)

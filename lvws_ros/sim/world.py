@@ -28,6 +28,7 @@ from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule
+from lvws_ros.core.subteams import shortfall
 from lvws_ros.errors import AssignmentRejected
 from lvws_ros.sim.config import ARM_KINDS, MOBILE_KINDS, CellConfig, RobotSpec, TaskSpec
 
@@ -185,7 +186,7 @@ class CellSim:
             if self.object_cell[obj.id] != spec.source:
                 raise AssignmentRejected(f"task {task_id}: {obj.id} is not at {spec.source}")
             total = sum(self.robot_spec[r].payload for r in robot_ids)
-            if total < obj.weight:
+            if shortfall(True, total, True, obj.weight)[1] > 0:  # Eq. 11, with the one tolerance
                 raise AssignmentRejected(f"task {task_id}: {obj.id} weighs {obj.weight:g}, subteam "
                                          f"{list(robot_ids)} carries only {total:g}")
         else:
@@ -197,7 +198,7 @@ class CellSim:
             if self.object_cell[obj.id] != spec.cell:
                 raise AssignmentRejected(f"task {task_id}: {obj.id} is not at {spec.cell} "
                                          f"(it is at {self.object_cell[obj.id] or 'a robot'})")
-            if arm.payload < spec.payload:
+            if shortfall(True, arm.payload, True, spec.payload)[1] > 0:
                 raise AssignmentRejected(f"task {task_id}: {arm.id} handles {arm.payload:g}, the part weighs "
                                          f"{spec.payload:g}")
 

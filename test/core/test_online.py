@@ -214,3 +214,27 @@ def test_a_robot_that_vanishes_releases_its_pending_assignment():
     assert any("left the latest snapshots" in n for n in online.notices)
     assert all("a" not in robots for robots, _ in online.pending.values())
     assert d2 is None or all("a" not in r for _, r in d2.assignments)
+
+
+def test_a_team_the_instance_would_refuse_is_refused_when_offered():
+    team, graph = _hand_made()
+    online = _fed(team, graph)
+    zero = dataclasses.replace(team, stamp=2.0, robots=(dataclasses.replace(team.robots[0], payload=0.0),
+                                                        team.robots[1]))
+    with pytest.raises(InstanceError, match=r"robots\[0\] \('a'\)\.payload: must be > 0"):
+        online.offer_team(zero)
+    twins = dataclasses.replace(team, stamp=2.0, robots=(team.robots[0], team.robots[0]))
+    with pytest.raises(InstanceError, match="duplicate ids"):
+        online.offer_team(twins)
+    assert online.team is team and online.decide() is not None
+
+
+def test_a_world_restart_drops_the_old_worlds_snapshots():
+    team, graph = _hand_made(stamp=500.0)
+    online = _fed(team, graph)
+    assert online.decide() is not None
+    assert online.offer_team(dataclasses.replace(team, stamp=1.0))
+    assert online.graph is None and online.decide() is None  # waits for the new world's graph
+    assert online.offer_graph(dataclasses.replace(graph, stamp=1.0))
+    d = online.decide()
+    assert d is not None and d.graph_stamp == 1.0

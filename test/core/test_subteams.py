@@ -97,3 +97,23 @@ def test_both_expert_formulations_agree_on_small_instances():
         b = solve_exact(inst, workers=2, formulation="boolean", time_limit=30)
         assert a.proven and b.proven and a.makespan == b.makespan
         assert b.schedule is not None and check_schedule(inst, b.schedule) == []
+
+
+def test_nan_is_never_covered():
+    from lvws_ros.core.subteams import covered
+
+    assert not covered([True], 1.0, [True], float("nan"))
+    assert not covered([True], float("nan"), [True], 1.0)
+
+
+def test_the_boolean_model_never_accepts_a_short_subteam_and_accepts_exact_fractions():
+    from lvws_ros.policies.exact import solve_exact
+
+    short = Instance("short", ("a",), tuple(Robot(f"r{i}", (1,), 0.4996) for i in range(4)),
+                     (Task("t0", (1,), 0.9995, 1.0), Task("t1", (1,), 0.9995, 1.0)))
+    res = solve_exact(short, workers=2, formulation="boolean", time_limit=20)
+    assert res.schedule is not None and check_schedule(short, res.schedule) == []
+    thirds = Instance("thirds", ("a",), tuple(Robot(f"r{i}", (1,), 1 / 3) for i in range(3)),
+                      (Task("t0", (1,), 1.0, 1.0),))
+    res = solve_exact(thirds, workers=2, formulation="boolean", time_limit=20)
+    assert res.proven and res.schedule is not None and check_schedule(thirds, res.schedule) == []

@@ -77,3 +77,22 @@ def test_the_cli_refuses_a_crafted_model_with_exit_2(crafted, tmp_path):
                           "--policy", "lvws", "--model", str(pt)], capture_output=True, text=True, timeout=300)
     assert res.returncode == 2 and "crafted.pt" in res.stderr and "Traceback" not in res.stderr, res.stderr
     assert not marker.exists()
+
+
+def test_demonstrations_of_different_sizes_round_trip(tmp_path):
+    from lvws_ros.core.datasets import DATASETS, dataset_instance
+    from lvws_ros.learning.demonstrations import expert_demos, save_demos
+
+    demos = [*expert_demos(dataset_instance(DATASETS["II"], 3, 0), time_limit=5, workers=2),
+             *expert_demos(dataset_instance(DATASETS["II"], 5, 0), time_limit=5, workers=2)]
+    assert len({d.expert.shape for d in demos}) > 1
+    save_demos(demos, tmp_path / "d.npz", {"k": 1})
+    back, meta = load_demos(tmp_path / "d.npz")
+    assert meta == {"k": 1} and len(back) == len(demos)
+    for a, b in zip(demos, back, strict=True):
+        for x, y in ((a.features.robots, b.features.robots), (a.features.tasks, b.features.tasks),
+                     (a.features.task_adjacency, b.features.task_adjacency), (a.features.pairs, b.features.pairs),
+                     (a.expert, b.expert), (a.mask, b.mask)):
+            assert x.dtype == y.dtype and np.array_equal(x, y)
+    save_demos([], tmp_path / "e.npz")
+    assert load_demos(tmp_path / "e.npz") == ([], {})

@@ -68,6 +68,7 @@ def test_sigkill_loses_at_most_the_last_second(ros_context, tmp_path, kill_after
     assert not (bag / "metadata.yaml").exists()  # killed: rosbags never wrote it
 
     assert lvws(["reindex", str(bag)]) == 0
+    assert lvws(["reindex", str(bag)]) == 2  # the original is kept: never overwritten by a second rebuild
     expected = {n for t, n in sent if t < killed_at - 1.0}
     for read in (_stamps_anyreader, _stamps_mcap):
         got = read(bag)
