@@ -8,9 +8,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from lvws_ros.core.families import TRAINING_FAMILIES
 from lvws_ros.core.formats import dumps, load_instance
 from lvws_ros.core.problem import Instance
-from lvws_ros.errors import InstanceError
+from lvws_ros.errors import ConfigError, InstanceError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
 
 # Heavy modules (ortools, matplotlib, torch) are imported inside the commands so that
@@ -146,17 +147,31 @@ def cmd_gantt(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    from lvws_ros.learning.checkpoint import DEFAULT_MODELS
     from lvws_ros.learning.gatn import GATNConfig
     from lvws_ros.learning.training import PipelineConfig, TrainConfig, run_pipeline
 
     model_cfg = GATNConfig(hidden=args.hidden, use_transformer=not args.dbgm)
     train_cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, lam=args.lam,
                             choice_weight=args.choice_weight, seed=args.seed, dbgm=args.dbgm, model=model_cfg)
-    cfg = PipelineConfig(datasets=tuple(args.datasets.split(",")), data_seed=args.data_seed, count=args.count,
+    datasets = tuple(d for d in args.datasets.split(",") if d)
+    unknown = [d for d in datasets if d not in ("I", "II")]
+    if unknown:
+        raise ConfigError(f"--datasets: {unknown} have no training split (choose from I, II)")
+    families = tuple((k, args.family_count) for k in args.families.split(",") if k)
+    bad = [k for k, _ in families if k not in TRAINING_FAMILIES]
+    if bad:
+        raise ConfigError(f"--families: {bad} are not training families (choose from {list(TRAINING_FAMILIES)})")
+    own = _instances(args.instances) if args.instances else []
+    init = None if args.init is None else DEFAULT_MODELS["dbgm" if args.dbgm else "lvws"] if args.init == "shipped" \
+        else Path(args.init)
+    cfg = PipelineConfig(datasets=datasets, data_seed=args.data_seed, count=args.count, families=families,
                          validation_per_dataset=args.validation, dagger_rounds=args.dagger_rounds,
                          dagger_instances=args.dagger_instances, dagger_epochs=args.dagger_epochs,
-                         processes=args.processes, ray_address=args.ray_address, train=train_cfg)
-    run_pipeline(cfg, args.out, cache_dir=args.cache_dir, resume=args.resume, progress=not args.quiet)
+                         label_time_limit=args.label_time_limit, processes=args.processes,
+                         ray_address=args.ray_address, train=train_cfg)
+    run_pipeline(cfg, args.out, cache_dir=args.cache_dir, resume=args.resume, init=init, own=own,
+                 progress=not args.quiet)
     return 0
 
 
@@ -216,7 +231,15 @@ def _add_evaluate(add: Adder) -> None:
 def _add_train(add: Adder) -> None:
     p = add("train", cmd_train, "imitation learning of the GATN (Eq. 12) on expert demonstrations, with DAgger")
     p.add_argument("--out", required=True, help="checkpoint to write (e.g. my_model.pt)")
-    p.add_argument("--datasets", default="I,II", help="training splits to use, comma-separated")
+    p.add_argument("--datasets", default="I,II", help="training splits to use, comma-separated ('' for none)")
+    p.add_argument("--families", default="mixed",
+                   help=f"training families, comma-separated ('' for none; from {list(TRAINING_FAMILIES)})")
+    p.add_argument("--family-count", type=int, default=4000, help="instances per training family")
+    p.add_argument("--instances", nargs="*", default=None,
+                   help="your own instance files or folders: labelled by the expert and trained on")
+    p.add_argument("--init", default=None,
+                   help="start from this checkpoint ('shipped': the shipped model): fine-tuning")
+    p.add_argument("--label-time-limit", type=float, default=5.0, help="CP-SAT time limit per labelled state [s]")
     p.add_argument("--count", type=int, default=None, help="training instances per dataset (default: all)")
     p.add_argument("--validation", type=int, default=100, help="held-out training instances per dataset")
     p.add_argument("--data-seed", type=int, default=0)

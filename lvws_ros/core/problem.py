@@ -137,12 +137,18 @@ class Instance:
 
     @cached_property
     def descendant_count(self) -> npt.NDArray[np.int64]:
-        """How many tasks depend on each task, directly or not."""
-        reach = self.precedence_matrix.copy()
+        """How many tasks depend on each task, directly or not: reachability as bit
+        sets (M^2 / 8 bytes, 3 MB at 5,000 tasks), O(M E / 8) time."""
+        m = self.num_tasks
+        reach = np.zeros((m, (m + 7) // 8), dtype=np.uint8)
+        bit = np.uint8(1) << (7 - np.arange(m) % 8).astype(np.uint8)  # np.packbits order
         for j in reversed(self.topological_order):
             for s in self.successors[j]:
                 reach[j] |= reach[s]
-        count: npt.NDArray[np.int64] = reach.sum(axis=1).astype(np.int64)
+                reach[j, s // 8] |= bit[s]
+        count = np.zeros(m, dtype=np.int64)
+        for a in range(0, m, 1024):  # popcount in row blocks: bounded memory
+            count[a:a + 1024] = np.unpackbits(reach[a:a + 1024], axis=1).sum(axis=1)
         return count
 
     @cached_property

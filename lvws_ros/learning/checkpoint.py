@@ -1,4 +1,4 @@
-"""Model checkpoints (``lvws-model/1``): the shipped models, loading and saving.
+"""Model checkpoints (``lvws-model/2``): the shipped models, loading and saving.
 
 A checkpoint is a dict of tensors and plain data (format, network config, state dict,
 meta with the training record; optionally the optimizer state and epoch of a training
@@ -20,11 +20,11 @@ __all__ = ["CHECKPOINT_FORMAT", "DEFAULT_MODELS", "MODEL_DIR", "load_checkpoint"
 
 MODEL_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_MODELS = {"lvws": MODEL_DIR / "lvws.pt", "dbgm": MODEL_DIR / "dbgm.pt"}
-CHECKPOINT_FORMAT = "lvws-model/1"
+CHECKPOINT_FORMAT = "lvws-model/2"  # /1: the first network (raw capability vectors, dense masks)
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
-    """The checkpoint's data (ModelError if missing or not ``lvws-model/1``)."""
+    """The checkpoint's data (ModelError if missing or not ``lvws-model/2``)."""
     p = Path(path)
     if not p.is_file():
         raise ModelError(f"{p}: model checkpoint not found")

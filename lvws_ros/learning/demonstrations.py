@@ -1,7 +1,8 @@
 """Expert demonstrations for imitation learning (LVWS paper, section III-C).
 
 A demonstration is one decision step: the graph features of the state, the expert
-reward matrix E (N x (M+1), last column the idle task) and the feasibility mask X.
+reward matrix E and the feasibility mask X over the entries a decision reads (the free
+robots x the ready tasks, last column the idle task).
 
 Expert rewards. Let k = 1, 2, ... count the decision steps after the current one in
 the expert's schedule from this state (a decision step is every distinct task end).
@@ -39,7 +40,7 @@ from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Schedule
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import ModelError
-from lvws_ros.learning.features import GraphFeatures, encode_state
+from lvws_ros.learning.features import GraphFeatures, InstanceFeatures
 from lvws_ros.learning.loss import Demo, feasibility_mask
 from lvws_ros.policies.exact import ExactPolicy, solve_exact
 
@@ -82,16 +83,21 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA) -> tuple
     return e, x
 
 
+def demo(state: State, schedule: Schedule, cache: InstanceFeatures) -> Demo:
+    """The demonstration of ``state``: its features and E, X on the entries it reads."""
+    feats = cache.encode(state)
+    e, x = label_state(state, schedule)
+    cols = [*feats.task_ids[feats.cols[:-1]], state.instance.num_tasks]
+    pick = np.ix_(feats.rows, cols)
+    return Demo(feats, e[pick], x[pick])
+
+
 def expert_demos(inst: Instance, time_limit: float = 30.0, workers: int = 2) -> list[Demo]:
     """Demonstrations along the expert's own schedule."""
     policy = ExactPolicy(time_limit=time_limit, workers=workers)
     run = simulate(inst, policy, record_states=True)
-    out = []
-    for step in run.steps:
-        assert step.state is not None
-        e, x = label_state(step.state, run.schedule)
-        out.append(Demo(encode_state(step.state), e, x))
-    return out
+    cache = InstanceFeatures(inst)
+    return [demo(step.state, run.schedule, cache) for step in run.steps if step.state is not None]
 
 
 def dagger_demos(inst: Instance, policy: Policy, time_limit: float = 30.0, workers: int = 2,
@@ -102,12 +108,12 @@ def dagger_demos(inst: Instance, policy: Policy, time_limit: float = 30.0, worke
     if max_states is not None and len(states) > max_states:
         keep = np.linspace(0, len(states) - 1, max_states).round().astype(int)
         states = [states[k] for k in keep]
+    cache = InstanceFeatures(inst)
     out = []
     for state in states:
         res = solve_exact(inst, state=state, time_limit=time_limit, workers=workers)
         assert res.schedule is not None
-        e, x = label_state(state, res.schedule)
-        out.append(Demo(encode_state(state), e, x))
+        out.append(demo(state, res.schedule, cache))
     return out
 
 
@@ -163,13 +169,13 @@ def label_instances(
     return [d for demos in results for d in demos]
 
 
-DEMOS_FORMAT = "lvws-demos/2"
-_ARRAYS = ("robots", "tasks", "task_adjacency", "pairs", "expert", "mask")
+DEMOS_FORMAT = "lvws-demos/3"
+_ARRAYS = ("robots", "tasks", "edges", "rows", "cols", "pairs", "task_ids", "expert", "mask")
 
 
 def _parts(d: Demo) -> tuple[np.ndarray, ...]:
     f = d.features
-    return f.robots, f.tasks, f.task_adjacency, f.pairs, d.expert, d.mask
+    return f.robots, f.tasks, f.edges, f.rows, f.cols, f.pairs, f.task_ids, d.expert, d.mask
 
 
 def save_demos(demos: Sequence[Demo], path: str | Path, meta: dict[str, Any] | None = None) -> None:
@@ -209,6 +215,6 @@ def load_demos(path: str | Path) -> tuple[list[Demo], dict[str, Any]]:
                                                                                           strict=True)]
     except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
         raise ModelError(f"{p}: not a readable {DEMOS_FORMAT} file ({type(exc).__name__}: {exc})") from None
-    demos = [Demo(GraphFeatures(split["robots"][k], split["tasks"][k], split["task_adjacency"][k], split["pairs"][k]),
-                  split["expert"][k], split["mask"][k]) for k in range(count)]
+    demos = [Demo(GraphFeatures(*(split[name][k] for name in _ARRAYS[:7])), split["expert"][k], split["mask"][k])
+             for k in range(count)]
     return demos, meta

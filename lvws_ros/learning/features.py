@@ -1,17 +1,37 @@
-"""Node features of the robot graph and the task DAG at a decision step (section III-A).
+"""Features of a decision step: the robot graph, the task DAG and robot-task pairs (section III-A).
 
-Robot vertex r_i = [a_i, c_i, w_i] plus what our model adds (time the robot is still
-busy). Task vertex t_j = [s_j (ready, assigned, incomplete), c_j, w_j] plus what our
-model adds: duration, critical-path tail (absolute and relative to the longest), share
-of tasks depending on it, and an idle flag; the idle task t_{M+1} is an extra vertex
-with no edges. Capability vectors are zero-padded to MAX_CAPABILITIES so one model
-serves 2-3 capabilities. Site capabilities ("@cell_1", see
-:data:`lvws_ros.core.problem.SITE_PREFIX`) are left out of the node features; the pair
-features below see them.
+The paper's vertices are r_i = [a_i, c_i, w_i] and t_j = [s_j, c_j, w_j] with raw
+capability vectors and payloads. Ours (model ``lvws-gatn/2``) keep a_i and s_j and
+replace the raw c and w by features that are
 
-Pair features (ours, for the reward MLP of Eq. 6), per robot i and task j: robot i
-alone covers j (Eqs. 10-11), i holds a capability j needs, the share of j's
-capabilities i holds, and i's payload relative to j's need (capped at 2).
+* **capability-agnostic**: capabilities enter only through counts, shares and the
+  coverage test of Eqs. 10-11 (:mod:`lvws_ros.core.subteams`), so one checkpoint serves
+  any K >= 1 and permuting the capability columns changes no feature;
+* **scale-free**: payloads are relative to the team's (mean robot payload, whole team),
+  durations to the instance's mean duration and critical path, so multiplying every
+  payload or every duration by a constant changes no feature.
+
+Robot vertex (ROBOT_FEATURES): a_i; busy time left / mean duration; payload / mean
+robot payload; capabilities held / K; rarity of its rarest capability (share of robots
+holding it); share of tasks it can help; share of tasks it covers alone.
+
+Task vertex (TASK_FEATURES), only for tasks not done (a done task changes no decision,
+and no task still to do waits on it): s_j = [ready, assigned, incomplete]; payload /
+mean robot payload; payload / team payload; capabilities needed / K; share of robots
+that hold one of them; rarity of its rarest capability; fewest robots that carry its
+payload (/ N, and capped count / 10); duration / mean duration; duration / critical
+path; critical-path tail / critical path; share of tasks depending on it; time left
+while assigned / mean duration; idle flag; share of tasks done (idle vertex only). The
+idle task t_{M+1} is the last vertex, with no edges.
+
+Pair features (PAIR_FEATURES, ours, for the reward MLP of Eq. 6), only for the entries a
+decision reads (free robots x ready tasks, and the idle column, all zeros): robot i
+alone covers j (Eqs. 10-11); i holds a capability j needs; share of j's capabilities i
+holds; min(w_i / w_j, 2) / 2; i is the only free robot holding one of j's capabilities.
+
+Cost per decision step: O(N K + T + E + R C K) with T the tasks not done, E their DAG
+edges, R the free robots and C the ready tasks; what depends on the instance alone is
+computed once (:class:`InstanceFeatures`).
 """
 
 from __future__ import annotations
@@ -21,93 +41,135 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from lvws_ros.core.executor import State
+from lvws_ros.core.executor import State, TaskStatus
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import covered
-from lvws_ros.errors import PolicyError
+from lvws_ros.core.subteams import TOLERANCE, covered, helps
 
-MAX_CAPABILITIES = 3
-PAYLOAD_SCALE = 30.0  # payloads are 1..30 in the paper's datasets
-TIME_SCALE = 10.0  # durations are 1..10 s in ours
-ROBOT_FEATURES = 1 + MAX_CAPABILITIES + 1 + 1
-TASK_FEATURES = 3 + MAX_CAPABILITIES + 1 + 1 + 3 + 1
-PAIR_FEATURES = 4
-TAIL_SCALE = 50.0
+ROBOT_FEATURES = 7
+TASK_FEATURES = 17
+PAIR_FEATURES = 5
+CAP_COUNT = 10.0  # "fewest robots" saturates here
 
 F32 = npt.NDArray[np.float32]
-
-# The dense network holds (M+1)^2 attention weights per head and layer: about
-# DENSE_BYTES_PER_PAIR bytes per task pair at a decision step. Past DENSE_MEMORY_LIMIT
-# the learned policies refuse the instance with a PolicyError (the CLI and the node
-# then say so) instead of running out of memory: about 14,000 tasks.
-DENSE_BYTES_PER_PAIR = 24
-DENSE_MEMORY_LIMIT = 4 * 2**30
-
-
-def check_size(inst: Instance) -> None:
-    """PolicyError when the dense network would need more than DENSE_MEMORY_LIMIT."""
-    need = DENSE_BYTES_PER_PAIR * ((inst.num_tasks + 1) ** 2 + inst.num_robots ** 2
-                                   + inst.num_robots * (inst.num_tasks + 1) * PAIR_FEATURES)
-    if need > DENSE_MEMORY_LIMIT:
-        raise PolicyError(f"{inst.num_robots} robots x {inst.num_tasks} tasks need about {need / 2**30:.0f} GiB in the "
-                          f"learned model (limit {DENSE_MEMORY_LIMIT / 2**30:.0f} GiB); use a baseline policy (grp)")
+I64 = npt.NDArray[np.int64]
 
 
 @dataclass(frozen=True)
 class GraphFeatures:
+    """One decision step. ``rows`` are the free robots (instance indices); ``cols`` index
+    ``tasks`` (the ready tasks, then the idle vertex, always last); ``pairs`` is
+    (len(rows), len(cols), PAIR_FEATURES)."""
+
     robots: F32  # (N, ROBOT_FEATURES)
-    tasks: F32  # (M+1, TASK_FEATURES), last row: idle task
-    task_adjacency: npt.NDArray[np.bool_]  # (M+1, M+1): P with the idle vertex unconnected
-    pairs: F32  # (N, M+1, PAIR_FEATURES), zeros in the idle column
+    tasks: F32  # (T+1, TASK_FEATURES): tasks not done, then the idle task
+    edges: I64  # (2, E): P_ij = 1 (i a prerequisite of j), local indices into ``tasks``
+    rows: I64  # (R,)
+    cols: I64  # (C,)
+    pairs: F32  # (R, C, PAIR_FEATURES)
+    task_ids: I64  # (T,): instance index of each task vertex
 
 
-def _pad_caps(caps: npt.NDArray[np.bool_]) -> F32:
-    k = caps.shape[1]
-    if k > MAX_CAPABILITIES:
-        raise PolicyError(f"the model handles at most {MAX_CAPABILITIES} skill capabilities, got {k}")
-    out = np.zeros((caps.shape[0], MAX_CAPABILITIES), dtype=np.float32)
-    out[:, :k] = caps
-    return out
+class InstanceFeatures:
+    """What depends on the instance alone, computed once per run."""
+
+    def __init__(self, inst: Instance) -> None:
+        n, m = inst.num_robots, inst.num_tasks
+        rc, tc = inst.robot_caps, inst.task_caps
+        k = max(rc.shape[1], 1)
+        self.instance = inst
+        mean_payload = float(inst.robot_payload.mean())
+        self.payload_unit = mean_payload if mean_payload > 0 else 1.0
+        team = float(inst.robot_payload.sum())
+        durations = inst.durations
+        self.time_unit = float(durations.mean()) if m else 1.0
+        tail = inst.critical_tail
+        critical = float(tail.max()) if m else 1.0
+        holders = rc.sum(axis=0) / n  # (K,) share of robots holding each capability
+        robot_rarity = np.where(rc, holders[None, :], 1.0).min(axis=1) if rc.shape[1] else np.ones(n)
+        help_ij = helps(rc, tc, inst.task_payload) if m else np.zeros((n, 0), bool)  # (N, M)
+        alone = covered(rc[:, None, :], inst.robot_payload[:, None], tc[None, :, :],
+                        inst.task_payload[None, :]) if m else np.zeros((n, 0), bool)
+        self.robots = np.zeros((n, ROBOT_FEATURES), np.float32)
+        self.robots[:, 2] = inst.robot_payload / self.payload_unit
+        self.robots[:, 3] = rc.sum(axis=1) / k
+        self.robots[:, 4] = robot_rarity
+        self.robots[:, 5] = help_ij.mean(axis=1) if m else 0.0
+        self.robots[:, 6] = alone.mean(axis=1) if m else 0.0
+        ordered = np.sort(inst.robot_payload)[::-1].cumsum()
+        fewest = np.searchsorted(ordered, inst.task_payload - TOLERANCE) + 1  # robots needed for the payload
+        self.tasks = np.zeros((m, TASK_FEATURES), np.float32)
+        self.tasks[:, 3] = inst.task_payload / self.payload_unit
+        self.tasks[:, 4] = inst.task_payload / team if team > 0 else 0.0
+        self.tasks[:, 5] = tc.sum(axis=1) / k
+        self.tasks[:, 6] = (rc.astype(np.float32) @ tc.T.astype(np.float32) > 0).mean(axis=0) if m else 0.0
+        self.tasks[:, 7] = np.where(tc, holders[None, :], 1.0).min(axis=1) if m else 0.0
+        self.tasks[:, 8] = np.minimum(fewest, n) / n
+        self.tasks[:, 9] = np.minimum(fewest, CAP_COUNT) / CAP_COUNT
+        self.tasks[:, 10] = durations / self.time_unit
+        self.tasks[:, 11] = durations / critical
+        self.tasks[:, 12] = tail / critical
+        self.tasks[:, 13] = inst.descendant_count / max(m, 1)
+        src = [p for j in range(m) for p in inst.prerequisites[j]]
+        dst = [j for j in range(m) for _ in inst.prerequisites[j]]
+        self.edges = np.array([src, dst], dtype=np.int64).reshape(2, -1)
+        self.alone = alone
+        self.rc32 = rc.astype(np.float32)
+        self.tc32 = tc.astype(np.float32)
+        self.need = np.maximum(tc.sum(axis=1), 1).astype(np.float32)
+
+    def encode(self, state: State, rows: npt.ArrayLike | None = None) -> GraphFeatures:
+        """Features of ``state``; ``rows`` (default: the free robots) choose the pair rows."""
+        inst = self.instance
+        m = inst.num_tasks
+        status = state.task_status
+        free = state.robot_available()
+        robots = self.robots.copy()
+        robots[:, 0] = free
+        robots[:, 1] = state.busy_remaining() / self.time_unit
+        keep = np.flatnonzero(status != TaskStatus.DONE)
+        t = len(keep)
+        tasks = np.zeros((t + 1, TASK_FEATURES), np.float32)
+        tasks[:t] = self.tasks[keep]
+        s = status[keep]
+        tasks[:t, 0] = s == TaskStatus.READY
+        tasks[:t, 1] = s == TaskStatus.ASSIGNED
+        tasks[:t, 2] = 1.0
+        left = state.task_end[keep] - state.time
+        tasks[:t, 14] = np.where(s == TaskStatus.ASSIGNED, np.nan_to_num(left), 0.0) / self.time_unit
+        tasks[t, 15] = 1.0  # the idle task t_{M+1}
+        tasks[t, 16] = 1.0 - t / max(m, 1)
+        local = np.full(m, -1, dtype=np.int64)
+        local[keep] = np.arange(t)
+        src, dst = local[self.edges[0]], local[self.edges[1]]
+        both = (src >= 0) & (dst >= 0)
+        edges = np.stack([src[both], dst[both]])
+        rows_ = np.flatnonzero(free) if rows is None else np.asarray(rows, dtype=np.int64)
+        ready = np.flatnonzero(status == TaskStatus.READY)
+        cols = np.append(local[ready], t).astype(np.int64)
+        return GraphFeatures(robots, tasks, edges, rows_.astype(np.int64), cols, self.pairs(rows_, ready, free),
+                             keep.astype(np.int64))
+
+    def pairs(self, rows: npt.NDArray[np.int64], ready: npt.NDArray[np.int64],
+              free: npt.NDArray[np.bool_]) -> F32:
+        """(len(rows), len(ready) + 1, PAIR_FEATURES); the idle column is zeros."""
+        inst = self.instance
+        out = np.zeros((len(rows), len(ready) + 1, PAIR_FEATURES), np.float32)
+        if not len(rows) or not len(ready):
+            return out
+        rc, tc = self.rc32[rows], self.tc32[ready]
+        shared = rc @ tc.T
+        out[:, :-1, 0] = self.alone[np.ix_(rows, ready)]
+        out[:, :-1, 1] = shared > 0
+        out[:, :-1, 2] = shared / self.need[ready][None, :]
+        ratio = inst.robot_payload[rows][:, None] / np.maximum(inst.task_payload[ready][None, :], TOLERANCE)
+        out[:, :-1, 3] = np.minimum(ratio, 2.0) / 2.0
+        sole = (self.rc32[free].sum(axis=0) == 1).astype(np.float32)  # capabilities one free robot holds
+        out[:, :-1, 4] = (rc * sole[None, :]) @ tc.T > 0
+        return out
 
 
-def encode_state(state: State, pairs: F32 | None = None) -> GraphFeatures:
-    """Features of ``state``; ``pairs`` may pass :func:`pair_features` of the instance,
-    which depend on the instance only, so a policy computes them once per run."""
-    inst = state.instance
-    robots = np.concatenate([
-        state.robot_available().astype(np.float32)[:, None],
-        _pad_caps(inst.robot_caps[:, list(inst.skill_columns)]),
-        (inst.robot_payload / PAYLOAD_SCALE).astype(np.float32)[:, None],
-        (state.busy_remaining() / TIME_SCALE).astype(np.float32)[:, None],
-    ], axis=1)
-    m = inst.num_tasks
-    tasks = np.zeros((m + 1, TASK_FEATURES), dtype=np.float32)
-    tasks[:m, 0:3] = state.task_state_vectors()
-    tasks[:m, 3:3 + MAX_CAPABILITIES] = _pad_caps(inst.task_caps[:, list(inst.skill_columns)])
-    tasks[:m, 3 + MAX_CAPABILITIES] = inst.task_payload / PAYLOAD_SCALE
-    tasks[:m, 4 + MAX_CAPABILITIES] = inst.durations / TIME_SCALE
-    tail = inst.critical_tail
-    tasks[:m, 5 + MAX_CAPABILITIES] = tail / TAIL_SCALE
-    tasks[:m, 6 + MAX_CAPABILITIES] = tail / tail.max()
-    tasks[:m, 7 + MAX_CAPABILITIES] = inst.descendant_count / max(m, 1)
-    tasks[m, 8 + MAX_CAPABILITIES] = 1.0  # the idle task t_{M+1}
-    adjacency = np.zeros((m + 1, m + 1), dtype=bool)
-    adjacency[:m, :m] = inst.precedence_matrix
-    return GraphFeatures(robots, tasks, adjacency, pair_features(inst) if pairs is None else pairs)
-
-
-def pair_features(inst: Instance) -> F32:
-    """Static robot-task pair features (they depend on the instance only)."""
-    rc = inst.robot_caps.astype(np.float32)
-    tc = inst.task_caps.astype(np.float32)
-    shared = rc @ tc.T  # (N, M)
-    need = tc.sum(axis=1)[None, :]
-    ratio = inst.robot_payload[:, None] / np.maximum(inst.task_payload[None, :], 1e-9)
-    alone = covered(inst.robot_caps[:, None, :], inst.robot_payload[:, None], inst.task_caps[None, :, :],
-                    inst.task_payload[None, :])  # Eqs. 10-11 for robot i alone
-    out = np.zeros((inst.num_robots, inst.num_tasks + 1, PAIR_FEATURES), dtype=np.float32)
-    out[:, :-1, 0] = alone
-    out[:, :-1, 1] = shared > 0
-    out[:, :-1, 2] = shared / need
-    out[:, :-1, 3] = np.minimum(ratio, 2.0) / 2.0
-    return out
+def encode_state(state: State, cache: InstanceFeatures | None = None) -> GraphFeatures:
+    """Features of ``state``; pass the run's :class:`InstanceFeatures` to reuse them."""
+    if cache is None or cache.instance is not state.instance:
+        cache = InstanceFeatures(state.instance)
+    return cache.encode(state)

@@ -1,8 +1,11 @@
 """The imitation loss of Eq. 12 and the expert targets it compares with.
 
 A :class:`Demo` is one decision step: its graph features, E (expert rewards, labelled
-by :mod:`lvws_ros.learning.demonstrations`) and X (the feasibility mask). They are
-padded here alike with the network's output, so Eq. 12 sees R, E and X of one shape.
+by :mod:`lvws_ros.learning.demonstrations`) and X (the feasibility mask), both over
+the entries a decision reads: the free robots x the ready tasks and the idle task
+(``features.rows`` x ``features.cols``). Entries no decision reads (busy robots, tasks
+not ready) are left out of Eq. 12: the policy never looks at them (ours; the paper sums
+over all N x (M+1) entries).
 """
 
 from __future__ import annotations
@@ -13,67 +16,72 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 import torch
-from torch import Tensor, nn
+from torch import Tensor
 
 from lvws_ros.core.subteams import BoolArray, FloatArray, helps
 from lvws_ros.learning.features import GraphFeatures
-from lvws_ros.learning.gatn import NEG, Batch, collate
+from lvws_ros.learning.gatn import NEG, Batch, collate, segment_softmax
 
-__all__ = ["Demo", "batch_tensors", "feasibility_mask", "imitation_loss"]
+__all__ = ["Demo", "Targets", "batch_tensors", "feasibility_mask", "imitation_loss"]
 
 
 @dataclass(frozen=True)
 class Demo:
     features: GraphFeatures
-    expert: npt.NDArray[np.float32]  # E, (N, M+1)
-    mask: npt.NDArray[np.bool_]  # X, (N, M+1)
+    expert: npt.NDArray[np.float32]  # E, (R, C)
+    mask: npt.NDArray[np.bool_]  # X, (R, C)
+
+
+@dataclass
+class Targets:
+    e: Tensor  # (entries,)
+    x: Tensor  # (entries,) 0/1
+    valid: Tensor  # (entries,) 0/1: entries in the loss (all but idle ones for DBGM)
+    choice: Tensor  # (rows,) flat entry index of each row's expert choice
 
 
 def feasibility_mask(robot_caps: BoolArray, task_caps: BoolArray, robot_payload: FloatArray,
                      task_payload: FloatArray) -> npt.NDArray[np.bool_]:
-    """X of Eq. 12 at one step: robot i can help task j (has a needed capability, or
-    the task needs payload); the idle column is always feasible."""
+    """X of Eq. 12: robot i can help task j (has a needed capability, or the task needs
+    payload); the idle column (last) is always feasible."""
     return np.concatenate([helps(robot_caps, task_caps, task_payload), np.ones((len(robot_caps), 1), dtype=bool)],
                           axis=1)
 
 
-def batch_tensors(demos: Sequence[Demo], use_idle: bool = True) -> tuple[Batch, Tensor, Tensor, Tensor]:
-    """Collated graphs with E, X and the mask of real entries, padded alike."""
+def batch_tensors(demos: Sequence[Demo], use_idle: bool = True) -> tuple[Batch, Targets]:
+    """Collated graphs with E, X, the entries in the loss, and each row's expert choice
+    (the argmax of E over the row's feasible entries, used by the choice term)."""
     batch = collate([d.features for d in demos])
-    shape = batch.reward_mask().shape
-    e = np.zeros(shape, np.float32)
-    x = np.zeros(shape, np.float32)
-    for k, d in enumerate(demos):
-        n, m1 = d.expert.shape
-        e[k, :n, :m1] = d.expert
-        x[k, :n, :m1] = d.mask
-    valid = batch.reward_mask().float()
-    if not use_idle:
-        cols = torch.arange(shape[2])[None, None, :]
-        valid = valid * (cols != batch.idle_index[:, None, None]).float()
-    return batch, torch.from_numpy(e), torch.from_numpy(x) * valid, valid
+    e = np.concatenate([d.expert.reshape(-1) for d in demos]).astype(np.float32)
+    x = np.concatenate([d.mask.reshape(-1) for d in demos]).astype(np.float32)
+    valid = np.ones_like(x) if use_idle else (~batch.entry_idle.numpy()).astype(np.float32)
+    x *= valid
+    choice = np.zeros(batch.rows, np.int64)
+    start = row = 0
+    for d in demos:
+        r, c = d.expert.shape
+        scored = np.where(d.mask.reshape(r, c) & (valid[start:start + r * c].reshape(r, c) > 0), d.expert, -1.0)
+        choice[row:row + r] = start + np.arange(r) * c + scored.argmax(axis=1)
+        start, row = start + r * c, row + r
+    return batch, Targets(torch.from_numpy(e), torch.from_numpy(x), torch.from_numpy(valid), torch.from_numpy(choice))
 
 
-def imitation_loss(r: Tensor, e: Tensor, x: Tensor, valid: Tensor, lam: float,
-                   choice_weight: float = 0.0, temperature: float = 0.1) -> Tensor:
-    """Eq. 12: ||(R - E) o X||_1 + lambda ||R - E||_1, averaged over the real entries
-    (``valid``) so that batches of different sizes weigh alike.
+def imitation_loss(r: Tensor, t: Targets, rows: Tensor, lam: float, choice_weight: float = 0.0,
+                   temperature: float = 0.1) -> Tensor:
+    """Eq. 12: ||(R - E) o X||_1 + lambda ||R - E||_1, averaged over the entries in the
+    loss so that batches of different sizes weigh alike. ``rows`` is each entry's row.
 
     With ``choice_weight`` > 0 (our addition, beyond the paper) a per-robot choice term
-    is added: for each robot with feasible options (a row of X with a 1), the cross
-    entropy of softmax(R / temperature) over those options against the expert's choice
-    (the argmax of E in the row). Eq. 12 alone regresses a sparse E under L1 norms, whose
-    minimiser is close to 0 everywhere; the choice term keeps the ranking that the
-    greedy matching reads.
+    is added: for each robot, the cross entropy of softmax(R / temperature) over its
+    feasible entries against the expert's choice. Eq. 12 alone regresses a sparse E
+    under L1 norms, whose minimiser is close to 0 everywhere; the choice term keeps the
+    ranking that the greedy matching reads.
     """
-    diff = (r - e).abs() * valid
-    count = valid.sum().clamp(min=1)
-    loss = (diff * x).sum() / count + lam * diff.sum() / count
-    if choice_weight > 0:
-        rows = x.sum(-1) > 0
-        if rows.any():
-            logits = (r / temperature).masked_fill(x <= 0, NEG)
-            target = torch.where(x > 0, e, torch.full_like(e, -1.0)).argmax(-1)
-            ce = nn.functional.cross_entropy(logits[rows], target[rows])
-            loss = loss + choice_weight * ce
+    diff = (r - t.e).abs() * t.valid
+    count = t.valid.sum().clamp(min=1)
+    loss = (diff * t.x).sum() / count + lam * diff.sum() / count
+    if choice_weight > 0 and len(t.choice):
+        logits = (r / temperature).masked_fill(t.x <= 0, NEG)[:, None]
+        p = segment_softmax(logits, rows, len(t.choice))[:, 0]
+        loss = loss - choice_weight * torch.log(p[t.choice].clamp(min=1e-12)).mean()
     return loss

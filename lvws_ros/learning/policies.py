@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,7 @@ from lvws_ros.core.matching import greedy_match
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import covers
 from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint
-from lvws_ros.learning.features import check_size, encode_state, pair_features
+from lvws_ros.learning.features import InstanceFeatures
 from lvws_ros.learning.gatn import GATN, reward_matrix
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
@@ -47,47 +48,48 @@ class LVWSPolicy:
             idle_bias = float(meta.get("idle_bias", 0.0)) if idle_bias is None else idle_bias
         self.model = model.eval()
         self.idle_bias = 0.0 if idle_bias is None else idle_bias
-        self._pairs: tuple[Instance, np.ndarray] | None = None
+        self._cache: InstanceFeatures | None = None
 
     def reset(self, instance: Instance) -> None:
-        if self._pairs is None or self._pairs[0] is not instance:  # rollouts reset once per simulation
-            check_size(instance)
-            self._pairs = (instance, pair_features(instance))
+        if self._cache is None or self._cache.instance is not instance:  # rollouts reset once per simulation
+            self._cache = InstanceFeatures(instance)
 
     def rewards(self, state: State) -> np.ndarray:
-        """R (N x (M+1)) of Eq. 6 for this decision step: one GATN forward pass, the
-        reward MLP only on the free robots x the ready tasks and the idle task (the
-        entries the matching reads; the others are NaN)."""
+        """R of Eq. 6 for this decision step, (free robots, ready tasks + idle task): one
+        forward pass, the reward MLP only on the entries the matching reads."""
         self.reset(state.instance)
-        assert self._pairs is not None
-        return reward_matrix(self.model, encode_state(state, self._pairs[1]), state.free_robots(),
-                             [*state.ready_tasks(), state.instance.num_tasks])
+        assert self._cache is not None
+        return reward_matrix(self.model, self._cache.encode(state))
 
-    def match(self, state: State, r: np.ndarray, free: list[int], idle_bias: float | None = None) -> Decision:
-        """Eqs. 7-11 on the rows of ``free`` and the ready tasks plus the idle column."""
+    def match(self, state: State, r: np.ndarray, subset: list[int] | None = None,
+              idle_bias: float | None = None) -> Decision:
+        """Eqs. 7-11 on ``r`` (rows: the free robots, columns: the ready tasks, then the
+        idle task), for the free robots in ``subset`` (default: all of them)."""
         inst = state.instance
-        ready = state.ready_tasks()
-        if not free or not ready:
-            return Decision((), tuple(free))
-        sub = r[np.ix_(free, [*ready, inst.num_tasks])]
+        ready, free = state.ready_tasks(), state.free_robots()
+        robots = free if subset is None else subset
+        if not robots or not ready:
+            return Decision((), tuple(robots))
+        row_of = {i: k for k, i in enumerate(free)}
+        sub = r[[row_of[i] for i in robots]].copy()
         bias = self.idle_bias if idle_bias is None else idle_bias
         if bias <= NO_VOLUNTARY_WAIT:
             _idle_last(sub)
         else:
             sub[:, -1] += bias
-        args = (inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[ready], inst.task_payload[ready])
+        args = (inst.robot_caps[robots], inst.robot_payload[robots], inst.task_caps[ready], inst.task_payload[ready])
         match = greedy_match(sub, *args)
         if not match.teams and not (state.task_status == TaskStatus.ASSIGNED).any():
             _idle_last(sub)  # waiting now would stall: take the best task instead
             match = greedy_match(sub, *args)
-        assignments = tuple((ready[j], tuple(free[i] for i in team)) for j, team in sorted(match.teams.items()))
-        return Decision(assignments, tuple(free[i] for i in match.waiting))
+        assignments = tuple((ready[j], tuple(robots[i] for i in team)) for j, team in sorted(match.teams.items()))
+        return Decision(assignments, tuple(robots[i] for i in match.waiting))
 
     def decide(self, state: State) -> Decision:
         free = state.free_robots()
         if not free or not state.ready_tasks():
             return Decision((), tuple(free))
-        return self.match(state, self.rewards(state), free)
+        return self.match(state, self.rewards(state))
 
 
 class DBGMPolicy:
@@ -97,38 +99,43 @@ class DBGMPolicy:
         if model is None:
             model = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["dbgm"])[0]
         self.model = model.eval()
+        self._cache: InstanceFeatures | None = None
 
     def reset(self, instance: Instance) -> None:
-        check_size(instance)
+        self._cache = InstanceFeatures(instance)
 
     def decide(self, state: State) -> Decision:
         inst = state.instance
         free, ready = state.free_robots(), state.ready_tasks()
         if not free or not ready:
             return Decision((), tuple(free))
-        r = reward_matrix(self.model, encode_state(state), free, ready)
+        if self._cache is None or self._cache.instance is not inst:
+            self.reset(inst)
+        assert self._cache is not None
+        r = reward_matrix(self.model, self._cache.encode(state))  # rows free, columns ready (+ idle, unused)
         out: list[tuple[int, tuple[int, ...]]] = []
-        pairs = [(r[i, j], i, j) for i in free for j in ready
+        pairs = [(r[a, b], a, b) for a, i in enumerate(free) for b, j in enumerate(ready)
                  if covers(inst.robot_caps[[i]], inst.robot_payload[[i]], inst.task_caps[j], inst.tasks[j].payload)]
         used_r: set[int] = set()
         used_t: set[int] = set()
-        for _, i, j in sorted(pairs, key=lambda p: -p[0]):  # one-to-one bipartite matching, best first
-            if i not in used_r and j not in used_t:
-                out.append((j, (i,)))
-                used_r.add(i)
-                used_t.add(j)
-        rest_r = [i for i in free if i not in used_r]
-        single = {j for _, _, j in pairs}
-        rest_t = [j for j in ready if j not in used_t and j not in single]  # need a subteam
+        for _, a, b in sorted(pairs, key=lambda p: -p[0]):  # one-to-one bipartite matching, best first
+            if a not in used_r and b not in used_t:
+                out.append((ready[b], (free[a],)))
+                used_r.add(a)
+                used_t.add(b)
+        rest_r = [a for a in range(len(free)) if a not in used_r]
+        single = {b for _, _, b in pairs}
+        rest_t = [b for b in range(len(ready)) if b not in used_t and b not in single]  # need a subteam
         if rest_r and rest_t:
             sub = r[np.ix_(rest_r, rest_t)]
             sub = np.concatenate([sub, np.zeros((len(rest_r), 1))], axis=1)
             _idle_last(sub)  # no idle task
-            match = greedy_match(sub, inst.robot_caps[rest_r], inst.robot_payload[rest_r],
-                                 inst.task_caps[rest_t], inst.task_payload[rest_t])
-            out += [(rest_t[j], tuple(rest_r[i] for i in team)) for j, team in match.teams.items()]
+            rr, tt = [free[a] for a in rest_r], [ready[b] for b in rest_t]
+            match = greedy_match(sub, inst.robot_caps[rr], inst.robot_payload[rr], inst.task_caps[tt],
+                                 inst.task_payload[tt])
+            out += [(tt[j], tuple(rr[i] for i in team)) for j, team in match.teams.items()]
             used_r |= {rest_r[i] for team in match.teams.values() for i in team}
-        return Decision(tuple(out), tuple(i for i in free if i not in used_r))
+        return Decision(tuple(out), tuple(free[a] for a in range(len(free)) if a not in used_r))
 
 
 def continue_after(state: State, decision: Decision, policy: Policy) -> float:
@@ -158,13 +165,17 @@ class LVWSRolloutPolicy:
     schedule from there (and GRP, with ``finish_with_grp``: the better of the two), and
     the shortest wins, LVWS's own on ties. Never worse than LVWS alone on the executor's
     model, at the price of one or two simulated schedules per distinct candidate and step.
+
+    ``budget_ms`` (anytime): candidates are scored in the order above until the budget
+    of the decision step is spent; the best scored so far wins (LVWS's own when none
+    was scored). None: no budget.
     """
 
     name = "lvws_rollout"
 
     def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
                  wait_biases: tuple[float, ...] = (-0.2, -0.1, 0.0), hold_back: bool = True,
-                 exclude: bool = True, finish_with_grp: bool = True) -> None:
+                 exclude: bool = True, finish_with_grp: bool = True, budget_ms: float | None = None) -> None:
         if model is None:
             model, meta = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["lvws"])
             base_bias = float(meta.get("idle_bias", NO_VOLUNTARY_WAIT))
@@ -174,6 +185,7 @@ class LVWSRolloutPolicy:
         self.wait_biases = wait_biases
         self.hold_back, self.exclude, self.finish_with_grp = hold_back, exclude, finish_with_grp
         self.grp = GreedyPayloadPolicy()
+        self.budget_ms = budget_ms
 
     def reset(self, instance: Instance) -> None:
         self.base.reset(instance)
@@ -185,15 +197,15 @@ class LVWSRolloutPolicy:
         if not free or not state.ready_tasks():
             return [Decision((), tuple(free))]
         r = self.base.rewards(state)
-        first = self.base.match(state, r, free)
-        proposals = [self.base.match(state, r, free, b) for b in self.wait_biases]
+        first = self.base.match(state, r)
+        proposals = [self.base.match(state, r, idle_bias=b) for b in self.wait_biases]
         proposals.append(self.grp.decide(state))
         if self.hold_back:
             proposals += [Decision(tuple(a for a in first.assignments if a != held),
                                    tuple(sorted({*first.waiting, *held[1]}))) for held in first.assignments]
         if self.exclude and len(free) > 1:
             for x in free:
-                d = self.base.match(state, r, [i for i in free if i != x])
+                d = self.base.match(state, r, [i for i in free if i != x])  # x waits
                 proposals.append(Decision(d.assignments, tuple(sorted({x, *d.waiting}))))
         out = [first]
         seen = {frozenset(first.assignments)}
@@ -210,8 +222,15 @@ class LVWSRolloutPolicy:
         return makespan
 
     def decide(self, state: State) -> Decision:
+        t0 = time.perf_counter()
         candidates = self.candidates(state)
         if len(candidates) == 1:
             return candidates[0]
-        scores = [self.score(state, d) for d in candidates]
-        return candidates[int(np.argmin(scores))]
+        best, best_score = candidates[0], math.inf
+        for d in candidates:
+            if self.budget_ms is not None and 1000 * (time.perf_counter() - t0) > self.budget_ms:
+                break
+            score = self.score(state, d)
+            if score < best_score:
+                best, best_score = d, score
+        return best

@@ -1,10 +1,13 @@
 """Imitation learning of the GATN with the loss of Eq. 12 and Adam; DAgger on top.
 
-Pipeline (``lvws train``): the training splits of the chosen datasets; the last
-VALIDATION_SHARE of them are held out for model selection (never the test splits);
-expert demonstrations on the rest; training; then DAgger rounds: roll the current
-policy out on training instances, label the states it reaches with the expert solving
-from each of them, add them to the data and train on.
+Pipeline (``lvws train``): the training splits of the chosen datasets, instances of
+the training family mixture (:mod:`lvws_ros.core.families`, ``mixed`` only: the held-out
+families are never trained or tuned on) and a user's own instances; the last
+instances of each source are held out for model selection (never a test split);
+expert demonstrations on the rest; training (from scratch, or fine-tuning a
+checkpoint with ``init``); then DAgger rounds: roll the current policy out on training
+instances, label the states it reaches with the expert solving from each of them, add
+them to the data and train on.
 """
 
 from __future__ import annotations
@@ -23,14 +26,14 @@ import torch
 
 from lvws_ros.core.datasets import DATASETS, dataset_instance
 from lvws_ros.core.executor import Policy, simulate
+from lvws_ros.core.families import FAMILIES, TRAINING_FAMILIES, family_instance
 from lvws_ros.core.problem import Instance
-from lvws_ros.learning.checkpoint import read_checkpoint, save_checkpoint
+from lvws_ros.errors import ConfigError
+from lvws_ros.learning.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from lvws_ros.learning.demonstrations import Demo, dagger_demos, label_instances, load_demos, save_demos
 from lvws_ros.learning.gatn import GATN, GATNConfig
 from lvws_ros.learning.loss import batch_tensors, imitation_loss
 from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, DBGMPolicy, LVWSPolicy
-
-VALIDATION_SHARE = 0.1
 
 
 @dataclass
@@ -51,8 +54,9 @@ def evaluate_loss(model: GATN, demos: Sequence[Demo], cfg: TrainConfig) -> float
     with torch.inference_mode():
         for k in range(0, len(demos), 256):
             chunk = demos[k:k + 256]
-            batch, e, x, valid = batch_tensors(chunk, use_idle=not cfg.dbgm)
-            total += imitation_loss(model(batch), e, x, valid, cfg.lam, cfg.choice_weight).item() * len(chunk)
+            batch, targets = batch_tensors(chunk, use_idle=not cfg.dbgm)
+            total += imitation_loss(model(batch), targets, batch.entry_row, cfg.lam,
+                                    cfg.choice_weight).item() * len(chunk)
             count += len(chunk)
     return total / max(count, 1)
 
@@ -106,9 +110,9 @@ def train(
         losses = []
         for idx in tqdm(rng.permutation(len(batches)), desc=f"epoch {epoch + 1}/{cfg.epochs}",
                         disable=not progress, unit="batch", leave=False):
-            batch, e, x, valid = batch_tensors([demos[k] for k in batches[idx]], use_idle=not cfg.dbgm)
+            batch, targets = batch_tensors([demos[k] for k in batches[idx]], use_idle=not cfg.dbgm)
             opt.zero_grad()
-            loss = imitation_loss(model(batch), e, x, valid, cfg.lam, cfg.choice_weight)
+            loss = imitation_loss(model(batch), targets, batch.entry_row, cfg.lam, cfg.choice_weight)
             loss.backward()
             opt.step()
             losses.append(loss.item())
@@ -132,6 +136,7 @@ def train(
 
 # ------------------------------------------------------------------ the whole pipeline
 
+VALIDATION_TIME_LIMIT = 10.0
 IDLE_BIASES = (0.0, -0.05, -0.1, -0.2, NO_VOLUNTARY_WAIT)
 
 
@@ -140,6 +145,7 @@ class PipelineConfig:
     datasets: tuple[str, ...] = ("I", "II")
     data_seed: int = 0
     count: int | None = None  # training instances per dataset (None: the whole split)
+    families: tuple[tuple[str, int], ...] = (("mixed", 4000),)  # (training family, instances)
     validation_per_dataset: int = 100
     dagger_rounds: int = 2
     dagger_instances: int = 1500
@@ -151,18 +157,28 @@ class PipelineConfig:
     train: TrainConfig = field(default_factory=TrainConfig)
 
 
-def split_training_instances(cfg: PipelineConfig) -> tuple[list[Instance], list[Instance]]:
-    """(training, validation) from the training splits only; validation is the last
-    ``validation_per_dataset`` training instances of each dataset."""
-    train_set: list[Instance] = []
-    val_set: list[Instance] = []
+def split_training_instances(cfg: PipelineConfig, own: Sequence[Instance] = ()) -> tuple[list[Instance],
+                                                                                            list[Instance]]:
+    """(training, validation) from the training splits of the datasets, the training
+    families and ``own`` instances; validation is the last ``validation_per_dataset``
+    instances of each source (at most a fifth of it)."""
+    sources: list[list[Instance]] = []
     for key in cfg.datasets:
         spec = DATASETS[key]
         n = spec.train if cfg.count is None else min(cfg.count, spec.train)
-        insts = [dataset_instance(spec, k, cfg.data_seed) for k in range(n)]
-        cut = max(1, min(cfg.validation_per_dataset, n // 5))
-        train_set += insts[:-cut]
-        val_set += insts[-cut:]
+        sources.append([dataset_instance(spec, k, cfg.data_seed) for k in range(n)])
+    for key, count in cfg.families:
+        if FAMILIES[key].held_out:
+            raise ConfigError(f"family {key!r} is held out for evaluation; train on {TRAINING_FAMILIES}")
+        sources.append([family_instance(key, k, cfg.data_seed) for k in range(count)])
+    if own:
+        sources.append(list(own))
+    train_set: list[Instance] = []
+    val_set: list[Instance] = []
+    for insts in sources:
+        cut = max(1, min(cfg.validation_per_dataset, len(insts) // 5)) if len(insts) > 1 else 0
+        train_set += insts[:len(insts) - cut]
+        val_set += insts[len(insts) - cut:]
     return train_set, val_set
 
 
@@ -194,17 +210,26 @@ def calibrate(model: GATN, val: Sequence[Instance], optimal: dict[str, float], d
 
 
 def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path | None = None,
-                 resume: str | Path | None = None, progress: bool = True,
+                 resume: str | Path | None = None, init: str | Path | None = None,
+                 own: Sequence[Instance] = (), progress: bool = True,
                  log: Callable[[str], None] = print) -> tuple[GATN, dict[str, Any]]:
-    """Label, train, calibrate, DAgger; write the final checkpoint (no optimizer state) to ``out``."""
+    """Label, train (from ``init``'s weights when given: fine-tuning), calibrate, DAgger;
+    write the final checkpoint (no optimizer state) to ``out``."""
     from lvws_ros.policies.exact import solve_exact
 
     tcfg = cfg.train
     torch.manual_seed(tcfg.seed)
-    train_set, val_set = split_training_instances(cfg)
-    log(f"{len(train_set)} training and {len(val_set)} validation instances from the training splits of "
-        f"datasets {cfg.datasets} (data seed {cfg.data_seed}, training seed {tcfg.seed})")
-    cache = Path(cache_dir) / f"demos-{'-'.join(cfg.datasets)}-s{cfg.data_seed}-n{len(train_set)}.npz" if cache_dir else None
+    train_set, val_set = split_training_instances(cfg, own)
+    log(f"{len(train_set)} training and {len(val_set)} validation instances: training splits of datasets "
+        f"{cfg.datasets}, families {cfg.families}, {len(own)} own instances (data seed {cfg.data_seed}, "
+        f"training seed {tcfg.seed})")
+    start: GATN | None = None
+    if init is not None:
+        start, init_meta = load_checkpoint(init)
+        tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
+        log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")
+    sources = "-".join([*cfg.datasets, *(f"{k}{n}" for k, n in cfg.families)] + (["own"] if own else []))
+    cache = Path(cache_dir) / f"demos-{sources}-s{cfg.data_seed}-n{len(train_set)}.npz" if cache_dir else None
     if cache is not None and cache.is_file():
         demos, _ = load_demos(cache)
         log(f"expert demonstrations from {cache}: {len(demos)} states")
@@ -215,9 +240,10 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
         log(f"expert demonstrations: {len(demos)} states in {time.perf_counter() - t0:.0f} s")
         if cache is not None:
             save_demos(demos, cache, {"datasets": cfg.datasets, "data_seed": cfg.data_seed})
-    optimal = {inst.name: float(solve_exact(inst, workers=2, time_limit=60).makespan or 0.0) for inst in val_set}
+    optimal = {inst.name: float(solve_exact(inst, workers=2, time_limit=VALIDATION_TIME_LIMIT).makespan or 0.0)
+               for inst in val_set}  # best known within the limit: only for model selection
     stages: list[dict[str, Any]] = []
-    model, history = train(demos, tcfg, checkpoint=Path(out).with_suffix(".train.pt"), resume=resume,
+    model, history = train(demos, tcfg, model=start, checkpoint=Path(out).with_suffix(".train.pt"), resume=resume,
                            progress=progress, log=log)
     bias, score = calibrate(model, val_set, optimal, tcfg.dbgm, log)
     stages.append({"stage": "imitation", "states": len(demos), "history": history, "idle_bias": bias,
@@ -243,7 +269,8 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
         if cand_score < score:  # keep a round only when it helps on validation
             model, bias, score = candidate, cand_bias, cand_score
     meta = {"kind": "dbgm" if tcfg.dbgm else "lvws", "idle_bias": bias, "validation_suboptimality": score,
-            "datasets": list(cfg.datasets), "data_seed": cfg.data_seed, "training_seed": tcfg.seed,
+            "datasets": list(cfg.datasets), "families": [list(f) for f in cfg.families], "own_instances": len(own),
+            "init": str(init) if init else None, "data_seed": cfg.data_seed, "training_seed": tcfg.seed,
             "pipeline": {k: v for k, v in asdict(cfg).items() if k != "train"}, "stages": stages}
     save_checkpoint(out, model, _with_config(meta, tcfg, model))
     log(f"model written to {out}: idle bias {bias:g}, validation suboptimality {score:.2f} %")

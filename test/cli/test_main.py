@@ -72,8 +72,12 @@ def test_evaluate_paper_writes_both_tables_and_the_waiting_section(tmp_path):
     lvws("evaluate", "--paper", "--limit", "2", "--policies", "grp,lvws", "--workers", "2", "--time-limit", "30",
          "--table2-time-limit", "2", "--out-dir", tmp_path, "--out-md", md, "--quiet")
     text = md.read_text()
-    for heading in ("## Table I", "## Table II", "## Decision time", "## Voluntary waiting"):
+    for heading in ("## Table I", "## Table I, other families", "## Table II", "## Decision time",
+                    "## Voluntary waiting"):
         assert heading in text
+    fam = re.findall(r"^\| (GRP|LVWS) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \|$", text, re.M)
+    assert {f[0] for f in fam} == {"GRP", "LVWS"}  # training family, assembly, mspsp: all valid, all measured
+    assert "| mixed (training family) | assembly (held out) | mspsp (held out) |" in text
     rows = {m[0]: [float(x) for x in m[1:]] for m in re.findall(
         r"^\| (GRP|LVWS) \| ([\d.]+) \| [\d.—]+ \| ([\d.]+) \| [\d.—]+ \|$", text, re.M)}
     assert set(rows) == {"GRP", "LVWS"} and all(x >= 0 for v in rows.values() for x in v)  # vs proven optima

@@ -91,8 +91,9 @@ def test_demonstrations_of_different_sizes_round_trip(tmp_path):
     assert meta == {"k": 1} and len(back) == len(demos)
     for a, b in zip(demos, back, strict=True):
         for x, y in ((a.features.robots, b.features.robots), (a.features.tasks, b.features.tasks),
-                     (a.features.task_adjacency, b.features.task_adjacency), (a.features.pairs, b.features.pairs),
-                     (a.expert, b.expert), (a.mask, b.mask)):
+                     (a.features.edges, b.features.edges), (a.features.rows, b.features.rows),
+                     (a.features.cols, b.features.cols), (a.features.pairs, b.features.pairs),
+                     (a.features.task_ids, b.features.task_ids), (a.expert, b.expert), (a.mask, b.mask)):
             assert x.dtype == y.dtype and np.array_equal(x, y)
     save_demos([], tmp_path / "e.npz")
     assert load_demos(tmp_path / "e.npz") == ([], {})

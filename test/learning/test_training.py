@@ -57,16 +57,22 @@ def test_parallel_and_ray_labelling_match_serial():
 def choice_accuracy(model, demos_by_state):
     hits = total = 0
     for state, demo in demos_by_state:
-        r = reward_matrix(model, demo.features)
-        got = {i: j for j, team in greedy_on(r, state) for i in team}
-        for i in state.free_robots():
+        inst = state.instance
+        r = reward_matrix(model, demo.features)  # rows: free robots; columns: ready tasks, idle
+        free, ready = state.free_robots(), state.ready_tasks()
+        assert list(demo.features.rows) == free and len(demo.features.cols) == len(ready) + 1
+        m = greedy_match(r, inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[ready],
+                         inst.task_payload[ready])
+        got = {i: j for j, team in m.teams.items() for i in team}
+        for a in range(len(free)):
             total += 1
-            hits += got.get(i, state.instance.num_tasks) == int(np.argmax(demo.expert[i]))
+            hits += got.get(a, len(ready)) == int(np.argmax(demo.expert[a]))
     return hits / total
 
 
 def test_tiny_model_learns(tmp_path):
-    cfg = PipelineConfig(datasets=("I",), count=40, validation_per_dataset=8, dagger_rounds=1, dagger_instances=8,
+    cfg = PipelineConfig(datasets=("I",), count=40, families=(), validation_per_dataset=8, dagger_rounds=1,
+                         dagger_instances=8,
                          dagger_epochs=1, processes=1,
                          train=TrainConfig(epochs=6, batch_size=32, lr=3e-3, seed=0, model=GATNConfig(hidden=32)))
     model, meta = run_pipeline(cfg, tmp_path / "tiny.pt", progress=False, log=lambda s: None)

@@ -1,0 +1,205 @@
+"""Instance families beyond the paper's recipe: a training mixture and held-out families.
+
+The paper's datasets (:mod:`lvws_ros.core.datasets`) are one generator. A model trained
+and measured only there says little about a user's cell, so we draw from families:
+
+* ``mixed`` — the training mixture (domain randomization). Per instance: K = 1..8
+  capabilities with skewed holders (each capability held with its own probability,
+  Beta(0.6, 0.8)), 2..20 robots, 5..40 tasks (small sizes more likely), a DAG shape among
+  :data:`DAG_SHAPES`, a payload regime (solo-feasible, mixed, or tasks needing 2-5 robots), integer or
+  float durations, and random units (payloads and durations multiplied by a random
+  power of ten, which the scale-free features must not notice).
+* ``assembly`` — held out (never used in training or model selection): product
+  assembly in-trees (parts -> sub-assemblies -> product, several products), 4..6
+  capabilities of which each robot holds one or two (specialists), payloads in kg
+  (robots 5..50, parts log-normal), log-normal float durations around 30 s.
+* ``mspsp`` — held out: multi-skill project scheduling style. Every robot is one
+  worker (payload 1) with 1..3 of K = 4..8 skills; a task needs 1..2 skills and 1..3
+  workers (payload = workers); project networks with 1..3 successors per activity and
+  skip edges; integer durations 1..20.
+
+Instance ``k`` of family ``f`` comes from ``numpy.random.default_rng([seed, code(f), k])``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lvws_ros.core.problem import Instance, Robot, Task
+
+DAG_SHAPES = ("random", "layered", "chains", "in_tree", "out_tree", "wide", "deep")
+PAYLOAD_REGIMES = ("solo", "mixed", "heavy")
+REGIME_PROBS = (0.2, 0.4, 0.4)
+
+
+@dataclass(frozen=True)
+class Family:
+    key: str
+    code: int
+    held_out: bool
+    description: str
+
+
+FAMILIES = {
+    "mixed": Family("mixed", 11, False, "training mixture: K 1-8, 2-20 robots, 5-40 tasks, 7 DAG shapes"),
+    "assembly": Family("assembly", 12, True, "held out: assembly in-trees, specialists, kg payloads, float durations"),
+    "mspsp": Family("mspsp", 13, True, "held out: multi-skill project scheduling (unit workers, K 4-8)"),
+}
+
+
+def _dag(rng: np.random.Generator, m: int, shape: str) -> list[list[int]]:
+    """Prerequisites of each task (indices < j, so the graph is acyclic)."""
+    pre: list[list[int]] = [[] for _ in range(m)]
+    if shape == "random":  # the paper's datasets: 0-2 prerequisites among earlier tasks
+        for j in range(1, m):
+            k = min(j, int(rng.choice(3, p=(0.35, 0.40, 0.25))))
+            pre[j] = sorted(int(p) for p in rng.choice(j, size=k, replace=False))
+    elif shape in ("layered", "wide", "deep"):
+        layers = {"layered": max(2, round(m ** 0.5)), "wide": 2, "deep": max(2, m // 2)}[shape]
+        cuts = [int(c) for c in np.sort(rng.choice(np.arange(1, m), size=min(layers, m) - 1, replace=False))] \
+            if m > 1 else []
+        bounds = [0, *cuts, m]
+        for a, b, c in zip(bounds, bounds[1:], bounds[2:], strict=False):
+            for j in range(b, c):
+                k = int(rng.integers(1, min(3, b - a) + 1))
+                pre[j] = sorted(int(p) for p in rng.choice(np.arange(a, b), size=k, replace=False))
+    elif shape == "chains":
+        chains = int(rng.integers(1, max(2, m // 3) + 1))
+        owner = rng.integers(chains, size=m)
+        for j in range(m):
+            earlier = [p for p in range(j) if owner[p] == owner[j]]
+            if earlier:
+                pre[j] = [earlier[-1]]
+    elif shape == "in_tree":  # many roots join into few sinks: task j waits on its children
+        for j in range(m - 1):
+            parent = int(rng.integers(j + 1, min(m, j + 4)))
+            pre[parent].append(j)
+        pre = [sorted(p) for p in pre]
+    elif shape == "out_tree":
+        for j in range(1, m):
+            pre[j] = [int(rng.integers(max(0, j - 4), j))]
+    else:
+        raise ValueError(f"unknown DAG shape {shape!r}")
+    return pre
+
+
+def _holders(rng: np.random.Generator, n: int, k: int) -> np.ndarray:
+    """(n, k) capability vectors, each capability held with its own probability; every
+    robot holds one and every capability is held."""
+    p = rng.beta(0.6, 0.8, size=k).clip(0.1, 0.95)
+    caps = rng.random((n, k)) < p
+    for i in np.flatnonzero(~caps.any(axis=1)):
+        caps[i, rng.integers(k)] = True
+    for c in np.flatnonzero(~caps.any(axis=0)):
+        caps[rng.integers(n), c] = True
+    return caps
+
+
+def _instance(name: str, k: int, robot_caps: np.ndarray, robot_payload: np.ndarray, task_caps: np.ndarray,
+              task_payload: np.ndarray, durations: np.ndarray, pre: list[list[int]]) -> Instance:
+    total = float(robot_payload.sum())
+    robots = tuple(Robot(f"r{i}", tuple(int(c) for c in robot_caps[i]), float(robot_payload[i]))
+                   for i in range(len(robot_payload)))
+    tasks = tuple(Task(f"t{j}", tuple(int(c) for c in task_caps[j]), float(min(task_payload[j], total)),
+                       float(durations[j]), tuple(f"t{p}" for p in pre[j])) for j in range(len(durations)))
+    return Instance(name, tuple(f"c{c}" for c in range(k)), robots, tasks)
+
+
+def _task_caps(rng: np.random.Generator, m: int, k: int, most: int) -> np.ndarray:
+    caps = np.zeros((m, k), dtype=bool)
+    for j in range(m):
+        caps[j, rng.choice(k, size=int(rng.integers(1, min(most, k) + 1)), replace=False)] = True
+    return caps
+
+
+def mixed_instance(rng: np.random.Generator, name: str, num_robots: int | None = None,
+                   num_tasks: int | None = None) -> Instance:
+    """One instance of the training mixture (module docstring)."""
+    k = int(rng.integers(1, 9))
+    n = num_robots or int(min(20, 2 + rng.geometric(0.15)))
+    m = num_tasks or int(min(40, 4 + rng.geometric(0.08)))
+    robot_caps = _holders(rng, n, k)
+    hi = int(rng.integers(2, 31))
+    robot_payload = rng.integers(1, hi + 1, size=n).astype(float)
+    regime = PAYLOAD_REGIMES[int(rng.choice(len(PAYLOAD_REGIMES), p=REGIME_PROBS))]
+    team = int(rng.integers(2, 6)) if regime == "heavy" else 1
+    mean = {"solo": 0.5, "mixed": 1.0, "heavy": float(team)}[regime] * float(np.median(robot_payload))
+    task_payload = np.maximum(rng.gamma(4.0, mean / 4.0, size=m).round(), 0.0)
+    if rng.random() < 0.5:
+        durations = rng.integers(1, int(rng.integers(3, 21)) + 1, size=m).astype(float)
+    else:
+        durations = rng.lognormal(1.5, 0.6, size=m).round(2).clip(0.1)
+    unit_p, unit_t = 10.0 ** rng.integers(-1, 3), 10.0 ** rng.integers(-1, 3)
+    shape = DAG_SHAPES[int(rng.integers(len(DAG_SHAPES)))]
+    return _instance(name, k, robot_caps, robot_payload * unit_p, _task_caps(rng, m, k, 3), task_payload * unit_p,
+                     durations * unit_t, _dag(rng, m, shape))
+
+
+def assembly_instance(rng: np.random.Generator, name: str, num_robots: int = 6, num_tasks: int = 18) -> Instance:
+    """One instance of the held-out assembly family (module docstring)."""
+    k = int(rng.integers(4, 7))
+    n, m = num_robots, num_tasks
+    robot_caps = np.zeros((n, k), dtype=bool)
+    for i in range(n):
+        robot_caps[i, rng.choice(k, size=int(rng.integers(1, 3)), replace=False)] = True
+    robot_caps[rng.permutation(n)[:k] if n >= k else rng.integers(n, size=k), np.arange(k)] = True
+    robot_payload = rng.uniform(5, 50, size=n).round(1)
+    task_payload = rng.lognormal(np.log(25), 0.8, size=m).round(1)
+    durations = rng.lognormal(np.log(30), 0.5, size=m).round(1)
+    products = int(rng.integers(1, 4))
+    owner = np.sort(rng.integers(products, size=m))
+    pre: list[list[int]] = [[] for _ in range(m)]
+    for prod in range(products):
+        members = [int(j) for j in np.flatnonzero(owner == prod)]
+        for a, j in enumerate(members[:-1]):  # each part feeds a later (sub-)assembly of its product
+            pre[members[int(rng.integers(a + 1, min(len(members), a + 4)))]].append(j)
+    return _instance(name, k, robot_caps, robot_payload, _task_caps(rng, m, k, 2), task_payload, durations,
+                     [sorted(p) for p in pre])
+
+
+def mspsp_instance(rng: np.random.Generator, name: str, num_robots: int = 6, num_tasks: int = 18) -> Instance:
+    """One instance of the held-out multi-skill project scheduling family (module docstring)."""
+    k = int(rng.integers(4, 9))
+    n, m = num_robots, num_tasks
+    robot_caps = np.zeros((n, k), dtype=bool)
+    for i in range(n):
+        robot_caps[i, rng.choice(k, size=int(rng.integers(1, 4)), replace=False)] = True
+    for c in np.flatnonzero(~robot_caps.any(axis=0)):
+        robot_caps[rng.integers(n), c] = True
+    task_caps = _task_caps(rng, m, k, 2)
+    workers = rng.integers(1, 4, size=m).astype(float)
+    durations = rng.integers(1, 21, size=m).astype(float)
+    pre: list[list[int]] = [[] for _ in range(m)]
+    for j in range(m - 1):
+        for s in rng.choice(np.arange(j + 1, m), size=min(m - j - 1, int(rng.integers(1, 4))), replace=False):
+            if rng.random() < 0.5 or s == j + 1:
+                pre[int(s)].append(j)
+    return _instance(name, k, robot_caps, np.ones(n), task_caps, workers, durations, [sorted(p) for p in pre])
+
+
+def family_instance(key: str, index: int, seed: int, num_robots: int | None = None,
+                    num_tasks: int | None = None) -> Instance:
+    """Instance ``index`` of family ``key`` (``mixed`` draws its own sizes unless given)."""
+    fam = FAMILIES[key]
+    rng = np.random.default_rng([seed, fam.code, index])
+    if key == "mixed":
+        inst = mixed_instance(rng, "tmp", num_robots, num_tasks)
+    elif key == "assembly":
+        inst = assembly_instance(rng, "tmp", num_robots or 6, num_tasks or 18)
+    else:
+        inst = mspsp_instance(rng, "tmp", num_robots or 6, num_tasks or 18)
+    return Instance(f"{inst.num_robots}r-{inst.num_tasks}t-{key}-{index:05d}", inst.capabilities, inst.robots,
+                    inst.tasks)
+
+
+TRAINING_FAMILIES = tuple(k for k, f in FAMILIES.items() if not f.held_out)
+HELD_OUT_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out)
+TEST_OFFSET = 1_000_000  # test instances of a family: indices from here (training uses 0, 1, ...)
+TEST_COUNT = 100
+
+
+def family_test_split(key: str, seed: int, count: int = TEST_COUNT) -> list[Instance]:
+    """The evaluation instances of family ``key``: indices TEST_OFFSET.., never trained on."""
+    return [family_instance(key, TEST_OFFSET + k, seed) for k in range(count)]
