@@ -217,6 +217,23 @@ def _waiting_section(cols: dict[str, Column], policies: Sequence[str], shares: d
     ]
 
 
+def _waiting_ablation(cols: dict[str, Column], meta: dict[str, Any]) -> list[str]:
+    keys = ["I", "II", *TRAINING_FAMILIES, *HELD_OUT_FAMILIES]
+    rows = [("lvws", f"LVWS as shipped (idle bias {_bias(meta['lvws'].get('idle_bias', 0.0))})"),
+            ("lvws_raw_idle", "LVWS, the network's idle column as it is (bias 0)"),
+            ("lvws_no_wait", "LVWS, no voluntary waiting")]
+    return [
+        "",
+        "## Voluntary waiting ablation — suboptimality % (share of decision steps with a voluntary wait %)",
+        "",
+        "| LVWS variant | " + " | ".join(k if k in ("I", "II") else f"{k}{' (held out)' if FAMILIES[k].held_out else ''}"
+                                        for k in keys) + " |",
+        "|---|" + "---|" * len(keys),
+        *[f"| {label} | " + " | ".join(f"{_fmt(mean_suboptimality(cols[k], p)[0])} ({_share(cols[k].runs[p])})"
+                                       for k in keys) + " |" for p, label in rows],
+    ]
+
+
 def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit: float = 60.0,
               table2_time_limit: float = 30.0, workers: int = 2, limit: int | None = None,
               cache_dir: Path = Path("data/paper"), progress: bool = True,
@@ -228,6 +245,12 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
     if unknown or not policies:
         raise PolicyError(f"the paper's tables compare {', '.join(POLICIES)}; got {list(policies)}")
     runners = {p: make_policy(p, seed=policy_seed) for p in policies}
+    table_runners = dict(runners)
+    if "lvws" in policies:  # the voluntary-waiting ablation
+        from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, LVWSPolicy
+
+        runners = {**runners, "lvws_no_wait": LVWSPolicy(idle_bias=NO_VOLUNTARY_WAIT),
+                   "lvws_raw_idle": LVWSPolicy(idle_bias=0.0)}
     cols = {}
     for key in ("I", "II"):
         insts = test_split(key, data_seed, limit)
@@ -241,7 +264,7 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
                                progress)
     insts3 = test_split("III", data_seed, limit)
     log(f"Table II, Dataset III: {len(insts3)} instances")
-    col3 = run_column(insts3, runners, cache_dir / f"expert-III-s{data_seed}.json", table2_time_limit, workers,
+    col3 = run_column(insts3, table_runners, cache_dir / f"expert-III-s{data_seed}.json", table2_time_limit, workers,
                       progress)
     meta = {k: load_checkpoint(DEFAULT_MODELS[k])[1] for k in ("lvws", "dbgm")}
     sample = min(limit or EXPERT_WAIT_SAMPLE, EXPERT_WAIT_SAMPLE)
@@ -256,6 +279,7 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
         *_table2(col3, policies, table2_time_limit),
         *_decision_times(cols["I"], policies),
         *_waiting_section(cols, policies, shares, sample),
+        *(_waiting_ablation(cols, meta) if "lvws" in policies else []),
     ]
     text = "\n".join(lines) + "\n"
     out.parent.mkdir(parents=True, exist_ok=True)

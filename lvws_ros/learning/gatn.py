@@ -57,6 +57,8 @@ class GATNConfig:
 
 def segment_softmax(logits: Tensor, segment: Tensor, count: int) -> Tensor:
     """Softmax of ``logits`` (E, H) within each segment id of ``segment`` (E,)."""
+    if count == 1:
+        return torch.softmax(logits, dim=0)  # one segment: the plain softmax (a decision's one graph)
     heads = logits.shape[1]
     top = torch.full((count, heads), NEG, dtype=logits.dtype, device=logits.device)
     top = top.scatter_reduce(0, segment[:, None].expand(-1, heads), logits, reduce="amax", include_self=True)
@@ -146,11 +148,15 @@ class GlobalAttention(nn.Module):
         k = self.u3(h).view(-1, self.heads, self.dh)
         v = self.u1(h).view(-1, self.heads, self.dh)
         beta = segment_softmax((q * k).sum(-1) / math.sqrt(self.dh), graph, b)  # Eq. 4
-        mixed = torch.zeros((b, self.heads, self.dh), dtype=h.dtype, device=h.device)
-        mixed = mixed.index_add_(0, graph, beta.unsqueeze(-1) * v).reshape(b, d)
+        if b == 1:
+            mixed = (beta.unsqueeze(-1) * v).sum(0).reshape(1, d)
+        else:
+            mixed = torch.zeros((b, self.heads, self.dh), dtype=h.dtype, device=h.device)
+            mixed = mixed.index_add_(0, graph, beta.unsqueeze(-1) * v).reshape(b, d)
         bar = self.ln1(mixed + g)  # Eq. 3
         g_new = self.ln2(self.mlp(bar) + bar)  # Eq. 5
-        h_new = self.ln3(h + self.node(torch.cat([h, g_new[graph]], dim=-1)))  # ours
+        g_nodes = g_new.expand(len(h), -1) if b == 1 else g_new[graph]
+        h_new = self.ln3(h + self.node(torch.cat([h, g_nodes], dim=-1)))  # ours
         return g_new, h_new
 
 
