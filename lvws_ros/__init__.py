@@ -15,7 +15,7 @@ The paper's equations, where they live:
 
 ==========  ==========================================================================
 Eq. 1-2     GAT layer (attention weights, aggregation): learning/gatn.py:GATLayer.forward
-Eq. 3-5     transformer for the global embedding: learning/gatn.py:TransformerLayer._attend
+Eq. 3-5     transformer for the global embedding: learning/gatn.py:GlobalAttention.forward
 Eq. 6       reward MLP R_ij = psi(h_i^r, h_j^t, g^r, g^t): learning/gatn.py:GATN.forward
 Eq. 7       maximise sum A_ij R_ij: core/matching.py:greedy_match (exact: policies/exact.py:exact_match)
 Eq. 8-9     one task (or the idle task) per robot: core/matching.py:greedy_match,

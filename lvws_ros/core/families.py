@@ -5,7 +5,7 @@ and measured only there says little about a user's cell, so we draw from familie
 
 * ``mixed`` — the training mixture (domain randomization). Per instance: K = 1..8
   capabilities with skewed holders (each capability held with its own probability,
-  Beta(0.6, 0.8)), 2..20 robots, 5..40 tasks (small sizes more likely), a DAG shape among
+  Beta(0.6, 0.8)), 3..20 robots, 5..40 tasks (small sizes more likely), a DAG shape among
   :data:`DAG_SHAPES`, a payload regime (solo-feasible, mixed, or tasks needing 2-5 robots), integer or
   float durations, and random units (payloads and durations multiplied by a random
   power of ten, which the scale-free features must not notice).

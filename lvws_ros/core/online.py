@@ -30,6 +30,7 @@ What the node should report (restarts, releases, untrusted readiness) collects i
 
 from __future__ import annotations
 
+import functools
 import graphlib
 import math
 import time
@@ -153,8 +154,14 @@ def check_graph(snap: GraphSnapshot) -> None:
         for name, value in (("start_time", t.start), ("end_time", t.end)):
             if value is not None:
                 _finite(value, f"{where}.{name}", high=math.inf)
+    _check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
+
+
+@functools.lru_cache(maxsize=4)
+def _check_acyclic(structure: tuple[tuple[str, tuple[str, ...]], ...]) -> None:
+    """InstanceError on a cycle; memoised, since a world sends the same DAG step after step."""
     try:
-        list(graphlib.TopologicalSorter({t.id: t.prerequisites for t in snap.tasks}).static_order())
+        list(graphlib.TopologicalSorter(dict(structure)).static_order())
     except graphlib.CycleError as exc:
         raise InstanceError(f"TaskGraph prerequisites: cycle {' -> '.join(exc.args[1])}") from None
 

@@ -6,7 +6,9 @@ replace the raw c and w by features that are
 
 * **capability-agnostic**: capabilities enter only through counts, shares and the
   coverage test of Eqs. 10-11 (:mod:`lvws_ros.core.subteams`), so one checkpoint serves
-  any K >= 1 and permuting the capability columns changes no feature;
+  any K >= 1 and permuting the capability columns changes no feature. Counts, shares
+  and rarity are over skills; sites ("@cell_1", :data:`lvws_ros.core.problem.SITE_PREFIX`)
+  enter through coverage and the pair features, as the matching enforces them;
 * **scale-free**: payloads are relative to the team's (mean robot payload, whole team),
   durations to the instance's mean duration and critical path, so multiplying every
   payload or every duration by a constant changes no feature.
@@ -75,7 +77,9 @@ class InstanceFeatures:
     def __init__(self, inst: Instance) -> None:
         n, m = inst.num_robots, inst.num_tasks
         rc, tc = inst.robot_caps, inst.task_caps
-        k = max(rc.shape[1], 1)
+        skills = list(inst.skill_columns)  # counts and rarity: skills only, not sites ("@...")
+        rs, ts = rc[:, skills], tc[:, skills]
+        k = max(len(skills), 1)
         self.instance = inst
         mean_payload = float(inst.robot_payload.mean())
         self.payload_unit = mean_payload if mean_payload > 0 else 1.0
@@ -84,14 +88,14 @@ class InstanceFeatures:
         self.time_unit = float(durations.mean()) if m else 1.0
         tail = inst.critical_tail
         critical = float(tail.max()) if m else 1.0
-        holders = rc.sum(axis=0) / n  # (K,) share of robots holding each capability
-        robot_rarity = np.where(rc, holders[None, :], 1.0).min(axis=1) if rc.shape[1] else np.ones(n)
+        holders = rs.sum(axis=0) / n  # (K,) share of robots holding each skill
+        robot_rarity = np.where(rs, holders[None, :], 1.0).min(axis=1, initial=1.0)
         help_ij = helps(rc, tc, inst.task_payload) if m else np.zeros((n, 0), bool)  # (N, M)
         alone = covered(rc[:, None, :], inst.robot_payload[:, None], tc[None, :, :],
                         inst.task_payload[None, :]) if m else np.zeros((n, 0), bool)
         self.robots = np.zeros((n, ROBOT_FEATURES), np.float32)
         self.robots[:, 2] = inst.robot_payload / self.payload_unit
-        self.robots[:, 3] = rc.sum(axis=1) / k
+        self.robots[:, 3] = rs.sum(axis=1) / k
         self.robots[:, 4] = robot_rarity
         self.robots[:, 5] = help_ij.mean(axis=1) if m else 0.0
         self.robots[:, 6] = alone.mean(axis=1) if m else 0.0
@@ -100,9 +104,10 @@ class InstanceFeatures:
         self.tasks = np.zeros((m, TASK_FEATURES), np.float32)
         self.tasks[:, 3] = inst.task_payload / self.payload_unit
         self.tasks[:, 4] = inst.task_payload / team if team > 0 else 0.0
-        self.tasks[:, 5] = tc.sum(axis=1) / k
-        self.tasks[:, 6] = (rc.astype(np.float32) @ tc.T.astype(np.float32) > 0).mean(axis=0) if m else 0.0
-        self.tasks[:, 7] = np.where(tc, holders[None, :], 1.0).min(axis=1) if m else 0.0
+        self.tasks[:, 5] = ts.sum(axis=1) / k
+        helpers = (rs.astype(np.float32) @ ts.T.astype(np.float32) > 0).mean(axis=0) if m else np.zeros(0)
+        self.tasks[:, 6] = np.where(ts.any(axis=1), helpers, 1.0) if m else 0.0
+        self.tasks[:, 7] = np.where(ts, holders[None, :], 1.0).min(axis=1, initial=1.0) if m else 0.0
         self.tasks[:, 8] = np.minimum(fewest, n) / n
         self.tasks[:, 9] = np.minimum(fewest, CAP_COUNT) / CAP_COUNT
         self.tasks[:, 10] = durations / self.time_unit

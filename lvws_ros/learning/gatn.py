@@ -67,8 +67,8 @@ def segment_softmax(logits: Tensor, segment: Tensor, count: int) -> Tensor:
     return ex / den[segment].clamp(min=1e-30)
 
 
-class GATLayer(nn.Module):
-    """Eqs. 1-2 with K heads (concatenated), dense over a padded fully connected graph."""
+class _GATWeights(nn.Module):
+    """W, a (split as a_src, a_dst) and the LeakyReLU of Eqs. 1-2, K heads concatenated."""
 
     def __init__(self, dim_in: int, dim_out: int, heads: int) -> None:
         super().__init__()
@@ -80,8 +80,12 @@ class GATLayer(nn.Module):
         self.a_dst = nn.Parameter(torch.randn(heads, self.dh) / math.sqrt(self.dh))
         self.act = nn.LeakyReLU(0.2)
 
-    def forward(self, h: Tensor, adj: Tensor, mask: Tensor) -> Tensor:
-        """h: (B, n, d_in); adj: (B, n, n) bool neighbours; mask: (B, n) real nodes.
+
+class GATLayer(_GATWeights):
+    """Eqs. 1-2, dense over padded graphs (the robot graph)."""
+
+    def forward(self, h: Tensor, adj: Tensor | None, mask: Tensor) -> Tensor:
+        """h: (B, n, d_in); adj: (B, n, n) bool neighbours (None: all, Q = ones); mask: (B, n) real nodes.
         Attending rows go in chunks of ROW_CHUNK: memory O(ROW_CHUNK n) per graph."""
         b, n, _ = h.shape
         wh = self.w(h).view(b, n, self.heads, self.dh)  # W h
@@ -90,11 +94,14 @@ class GATLayer(nn.Module):
         out = [self._rows(wh, s_src, s_dst, adj, mask, a, min(n, a + ROW_CHUNK)) for a in range(0, n, ROW_CHUNK)]
         return torch.cat(out, dim=1).reshape(b, n, -1) * mask.unsqueeze(-1) if out else h.new_zeros(b, 0, wh[0, 0].numel())
 
-    def _rows(self, wh: Tensor, s_src: Tensor, s_dst: Tensor, adj: Tensor, mask: Tensor, a: int, z: int) -> Tensor:
+    def _rows(self, wh: Tensor, s_src: Tensor, s_dst: Tensor, adj: Tensor | None, mask: Tensor, a: int,
+              z: int) -> Tensor:
         n = wh.shape[1]
         e = s_src[:, a:z].unsqueeze(2) + s_dst.unsqueeze(1)  # (B, rows, n, H)
         eye = (torch.arange(a, z)[:, None] == torch.arange(n)[None, :]).unsqueeze(0)
-        allowed = (adj[:, a:z] | eye) & mask.unsqueeze(1) & mask[:, a:z].unsqueeze(2)
+        allowed = mask.unsqueeze(1) & mask[:, a:z].unsqueeze(2)
+        if adj is not None:
+            allowed = allowed & (adj[:, a:z] | eye)
         e = self.act(e).masked_fill(~allowed.unsqueeze(-1), NEG)
         alpha = torch.softmax(e, dim=2)  # over neighbours j (and i itself)
         self_term = (alpha * eye.unsqueeze(-1)).sum(2).unsqueeze(-1) * wh[:, a:z]
@@ -103,7 +110,7 @@ class GATLayer(nn.Module):
         return self_term + self.act(neigh_term)
 
 
-class SparseGATLayer(GATLayer):
+class SparseGATLayer(_GATWeights):
     """Eqs. 1-2 by message passing over an edge list (node i attends to itself and to
     every j with an edge i -> j)."""
 
@@ -201,12 +208,11 @@ class GATN(nn.Module):
 
     def encode(self, batch: Batch) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """(h_r flat over real robots, h_t flat, g_r, g_t)."""
-        b, n = batch.robot_mask.shape
+        b = batch.robot_mask.shape[0]
         enc = self.robot_encoder
         hr = enc.inp(batch.robots) * batch.robot_mask.unsqueeze(-1)
-        full = torch.ones(b, n, n, dtype=torch.bool)  # Q = ones
         for gat in enc.gats:
-            hr = hr + gat(hr, full, batch.robot_mask)  # residual keeps deep stacks trainable
+            hr = hr + gat(hr, None, batch.robot_mask)  # Q = ones; residual keeps deep stacks trainable
         hr_flat = hr[batch.robot_mask]
         g_r, hr_flat = enc.run_globals(hr_flat, batch.robot_graph, b)
         enc = self.task_encoder

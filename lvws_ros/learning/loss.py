@@ -38,6 +38,7 @@ class Targets:
     x: Tensor  # (entries,) 0/1
     valid: Tensor  # (entries,) 0/1: entries in the loss (all but idle ones for DBGM)
     choice: Tensor  # (rows,) flat entry index of each row's expert choice
+    choice_valid: Tensor  # (rows,) bool: the row has an expert choice among its entries in the loss
 
 
 def feasibility_mask(robot_caps: BoolArray, task_caps: BoolArray, robot_payload: FloatArray,
@@ -57,13 +58,18 @@ def batch_tensors(demos: Sequence[Demo], use_idle: bool = True) -> tuple[Batch, 
     valid = np.ones_like(x) if use_idle else (~batch.entry_idle.numpy()).astype(np.float32)
     x *= valid
     choice = np.zeros(batch.rows, np.int64)
+    has_choice = np.zeros(batch.rows, bool)
     start = row = 0
     for d in demos:
         r, c = d.expert.shape
         scored = np.where(d.mask.reshape(r, c) & (valid[start:start + r * c].reshape(r, c) > 0), d.expert, -1.0)
         choice[row:row + r] = start + np.arange(r) * c + scored.argmax(axis=1)
+        # a row has a choice only where the expert's pick is an entry in the loss (not so
+        # for a robot the expert keeps waiting when the idle column is left out: DBGM)
+        has_choice[row:row + r] = scored.max(axis=1, initial=-1.0) > 0
         start, row = start + r * c, row + r
-    return batch, Targets(torch.from_numpy(e), torch.from_numpy(x), torch.from_numpy(valid), torch.from_numpy(choice))
+    return batch, Targets(torch.from_numpy(e), torch.from_numpy(x), torch.from_numpy(valid), torch.from_numpy(choice),
+                          torch.from_numpy(has_choice))
 
 
 def imitation_loss(r: Tensor, t: Targets, rows: Tensor, lam: float, choice_weight: float = 0.0,
@@ -72,16 +78,16 @@ def imitation_loss(r: Tensor, t: Targets, rows: Tensor, lam: float, choice_weigh
     loss so that batches of different sizes weigh alike. ``rows`` is each entry's row.
 
     With ``choice_weight`` > 0 (our addition, beyond the paper) a per-robot choice term
-    is added: for each robot, the cross entropy of softmax(R / temperature) over its
-    feasible entries against the expert's choice. Eq. 12 alone regresses a sparse E
+    is added: for each robot whose expert choice is an entry in the loss, the cross
+    entropy of softmax(R / temperature) over its feasible entries against that choice. Eq. 12 alone regresses a sparse E
     under L1 norms, whose minimiser is close to 0 everywhere; the choice term keeps the
     ranking that the greedy matching reads.
     """
     diff = (r - t.e).abs() * t.valid
     count = t.valid.sum().clamp(min=1)
     loss = (diff * t.x).sum() / count + lam * diff.sum() / count
-    if choice_weight > 0 and len(t.choice):
+    if choice_weight > 0 and bool(t.choice_valid.any()):
         logits = (r / temperature).masked_fill(t.x <= 0, NEG)[:, None]
         p = segment_softmax(logits, rows, len(t.choice))[:, 0]
-        loss = loss - choice_weight * torch.log(p[t.choice].clamp(min=1e-12)).mean()
+        loss = loss - choice_weight * torch.log(p[t.choice[t.choice_valid]].clamp(min=1e-12)).mean()
     return loss

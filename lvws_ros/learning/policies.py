@@ -23,7 +23,6 @@ import numpy as np
 from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, simulate
 from lvws_ros.core.matching import greedy_match
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import covers
 from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint
 from lvws_ros.learning.features import InstanceFeatures
 from lvws_ros.learning.gatn import GATN, reward_matrix
@@ -114,8 +113,8 @@ class DBGMPolicy:
         assert self._cache is not None
         r = reward_matrix(self.model, self._cache.encode(state))  # rows free, columns ready (+ idle, unused)
         out: list[tuple[int, tuple[int, ...]]] = []
-        pairs = [(r[a, b], a, b) for a, i in enumerate(free) for b, j in enumerate(ready)
-                 if covers(inst.robot_caps[[i]], inst.robot_payload[[i]], inst.task_caps[j], inst.tasks[j].payload)]
+        alone = self._cache.alone[np.ix_(free, ready)]  # robot covers the task alone (Eqs. 10-11)
+        pairs = [(r[a, b], int(a), int(b)) for a, b in zip(*np.nonzero(alone), strict=True)]
         used_r: set[int] = set()
         used_t: set[int] = set()
         for _, a, b in sorted(pairs, key=lambda p: -p[0]):  # one-to-one bipartite matching, best first

@@ -13,6 +13,7 @@ them to the data and train on.
 from __future__ import annotations
 
 import copy
+import hashlib
 import math
 import statistics
 import time
@@ -26,11 +27,12 @@ import torch
 
 from lvws_ros.core.datasets import DATASETS, dataset_instance
 from lvws_ros.core.executor import Policy, simulate
-from lvws_ros.core.families import FAMILIES, TRAINING_FAMILIES, family_instance
+from lvws_ros.core.families import FAMILIES, TEST_OFFSET, TRAINING_FAMILIES, family_instance
+from lvws_ros.core.formats import instance_key
 from lvws_ros.core.problem import Instance
-from lvws_ros.errors import ConfigError
+from lvws_ros.errors import ConfigError, ModelError
 from lvws_ros.learning.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
-from lvws_ros.learning.demonstrations import Demo, dagger_demos, label_instances, load_demos, save_demos
+from lvws_ros.learning.demonstrations import DEMOS_FORMAT, Demo, dagger_demos, label_instances, load_demos, save_demos
 from lvws_ros.learning.gatn import GATN, GATNConfig
 from lvws_ros.learning.loss import batch_tensors, imitation_loss
 from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, DBGMPolicy, LVWSPolicy
@@ -99,8 +101,8 @@ def train(
         model = GATN(cfg.model)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     start_epoch = 0 if resume is None else _resume(resume, model, opt, log)
-    # Batches of similar sizes pad less: sort by graph size, shuffle the batches.
-    order = sorted(range(len(demos)), key=lambda k: (demos[k].expert.shape, k))
+    # Batches of similar team sizes pad less (robots are padded per batch): sort, shuffle the batches.
+    order = sorted(range(len(demos)), key=lambda k: (demos[k].features.robots.shape[0], demos[k].expert.shape, k))
     batches = [order[k:k + cfg.batch_size] for k in range(0, len(order), cfg.batch_size)]
     history: list[dict[str, float]] = []
     best_score, best_state = math.inf, None
@@ -168,6 +170,8 @@ def split_training_instances(cfg: PipelineConfig, own: Sequence[Instance] = ()) 
         n = spec.train if cfg.count is None else min(cfg.count, spec.train)
         sources.append([dataset_instance(spec, k, cfg.data_seed) for k in range(n)])
     for key, count in cfg.families:
+        if count > TEST_OFFSET:
+            raise ConfigError(f"family {key!r}: at most {TEST_OFFSET} training instances (test indices start there)")
         if FAMILIES[key].held_out:
             raise ConfigError(f"family {key!r} is held out for evaluation; train on {TRAINING_FAMILIES}")
         sources.append([family_instance(key, k, cfg.data_seed) for k in range(count)])
@@ -180,6 +184,28 @@ def split_training_instances(cfg: PipelineConfig, own: Sequence[Instance] = ()) 
         train_set += insts[:len(insts) - cut]
         val_set += insts[len(insts) - cut:]
     return train_set, val_set
+
+
+def _cache_path(cache_dir: str | Path, cfg: PipelineConfig, train_set: Sequence[Instance]) -> Path:
+    """Demonstrations are cached by what they are: the format, the sources, the content of
+    every training instance and the expert's time limit."""
+    sources = "-".join([*cfg.datasets, *(f"{k}{n}" for k, n in cfg.families)])
+    digest = hashlib.sha256("".join(instance_key(i) for i in train_set).encode()).hexdigest()[:12]
+    version = DEMOS_FORMAT.split("/")[-1]
+    return Path(cache_dir) / (f"demos{version}-{sources or 'own'}-s{cfg.data_seed}-n{len(train_set)}"
+                              f"-t{cfg.label_time_limit:g}-{digest}.npz")
+
+
+def _cached_demos(cache: Path, log: Callable[[str], None]) -> list[Demo] | None:
+    if not cache.is_file():
+        return None
+    try:
+        demos, _ = load_demos(cache)
+    except ModelError as exc:
+        log(f"{exc}: labelling again")
+        return None
+    log(f"expert demonstrations from {cache}: {len(demos)} states")
+    return demos
 
 
 def _policy(model: GATN, dbgm: bool, idle_bias: float) -> Policy:
@@ -201,7 +227,8 @@ def calibrate(model: GATN, val: Sequence[Instance], optimal: dict[str, float], d
     best = (0.0, math.inf)
     for bias in (IDLE_BIASES if not dbgm else (0.0,)):
         score = statistics.fmean(
-            100 * (simulate(inst, _policy(model, dbgm, bias)).schedule.makespan - optimal[inst.name]) / optimal[inst.name]
+            100 * (simulate(inst, _policy(model, dbgm, bias)).schedule.makespan - optimal[instance_key(inst)])
+            / optimal[instance_key(inst)]
             for inst in val)
         log(f"  validation: idle bias {bias:g} -> suboptimality {score:.2f} %")
         if score < best[1]:
@@ -228,19 +255,16 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
         start, init_meta = load_checkpoint(init)
         tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
         log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")
-    sources = "-".join([*cfg.datasets, *(f"{k}{n}" for k, n in cfg.families)] + (["own"] if own else []))
-    cache = Path(cache_dir) / f"demos-{sources}-s{cfg.data_seed}-n{len(train_set)}.npz" if cache_dir else None
-    if cache is not None and cache.is_file():
-        demos, _ = load_demos(cache)
-        log(f"expert demonstrations from {cache}: {len(demos)} states")
-    else:
+    cache = _cache_path(cache_dir, cfg, train_set) if cache_dir else None
+    demos = _cached_demos(cache, log) if cache is not None else None
+    if demos is None:
         t0 = time.perf_counter()
         demos = label_instances(train_set, processes=cfg.processes, time_limit=cfg.label_time_limit,
                                 ray_address=cfg.ray_address, progress=progress)
         log(f"expert demonstrations: {len(demos)} states in {time.perf_counter() - t0:.0f} s")
         if cache is not None:
             save_demos(demos, cache, {"datasets": cfg.datasets, "data_seed": cfg.data_seed})
-    optimal = {inst.name: float(solve_exact(inst, workers=2, time_limit=VALIDATION_TIME_LIMIT).makespan or 0.0)
+    optimal = {instance_key(inst): float(solve_exact(inst, workers=2, time_limit=VALIDATION_TIME_LIMIT).makespan or 0.0)
                for inst in val_set}  # best known within the limit: only for model selection
     stages: list[dict[str, Any]] = []
     model, history = train(demos, tcfg, model=start, checkpoint=Path(out).with_suffix(".train.pt"), resume=resume,
