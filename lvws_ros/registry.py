@@ -19,7 +19,8 @@ LEARNED_POLICIES = ("lvws", "lvws_rollout", "dbgm")  # take a model_path
 
 def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     """A policy by its name. ``options``: ``time_limit``/``workers`` for ``exact``,
-    ``model_path`` for the learned ones (empty or None: the shipped checkpoint)."""
+    ``model_path`` for the learned ones (empty or None: the shipped checkpoint),
+    ``budget_ms`` for ``lvws_rollout`` (per decision step; None: no budget)."""
     if name == "grp":
         from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
@@ -38,5 +39,7 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
         model_path = options.get("model_path") or None
         kinds: dict[str, type[LVWSPolicy | DBGMPolicy | LVWSRolloutPolicy]] = {
             "lvws": LVWSPolicy, "dbgm": DBGMPolicy, "lvws_rollout": LVWSRolloutPolicy}
+        if name == "lvws_rollout":
+            return LVWSRolloutPolicy(model_path=model_path, budget_ms=options.get("budget_ms"))
         return kinds[name](model_path=model_path)
     raise PolicyError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")

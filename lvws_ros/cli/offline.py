@@ -55,7 +55,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if args.policy == "exact":
         options = {"time_limit": args.time_limit, "workers": args.workers}
     elif args.policy in LEARNED_POLICIES:
-        options = {"model_path": args.model}
+        options = {"model_path": args.model, "budget_ms": args.budget_ms}
     policy = make_policy(args.policy, seed=args.seed, **options)
     result = simulate(inst, policy)
     expert = getattr(policy, "result", None)
@@ -193,6 +193,8 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--time-limit", type=float, default=60.0, help="exact policy: CP-SAT time limit [s]")
     p.add_argument("--workers", type=int, default=8, help="exact policy: CP-SAT workers")
     p.add_argument("--model", default=None, help="lvws/dbgm policy: checkpoint (default: the shipped one)")
+    p.add_argument("--budget-ms", type=float, default=None,
+                   help="lvws_rollout: time budget per decision step [ms] (default: none)")
     p.add_argument("--out", help="also write the schedule to this file")
 
     p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")

@@ -24,8 +24,13 @@ Robustness (the rules the scheduler node follows, whatever a message holds):
 * Assignments the world has not acknowledged within ``ack_timeout`` seconds, or whose
   task or robots vanished from the latest snapshots, are released.
 
-What the node should report (restarts, releases, untrusted readiness) collects in
-:attr:`OnlineScheduler.notices`.
+* Fallback: when the main policy cannot serve a step (it raises, e.g. a model that
+  refuses the instance or gives non-finite rewards, or its decision breaks Eqs. 8-11),
+  the ``fallback`` policy decides that step and a notice names both and the reason; the
+  scheduler never stalls on its main policy. Without a fallback the error propagates.
+
+What the node should report (restarts, releases, untrusted readiness, fallbacks)
+collects in :attr:`OnlineScheduler.notices`.
 """
 
 from __future__ import annotations
@@ -234,8 +239,12 @@ def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: G
 class OnlineScheduler:
     """Decides when a robot became available or a task became ready; see the module doc."""
 
-    def __init__(self, policy: Policy, ack_timeout: float = 5.0, restart_jump: float = RESTART_JUMP) -> None:
+    def __init__(self, policy: Policy, ack_timeout: float = 5.0, restart_jump: float = RESTART_JUMP,
+                 fallback: Policy | None = None) -> None:
         self.policy = policy
+        self.fallback = fallback
+        self.fallbacks = 0  # steps the fallback decided
+        self._main_refused = ""  # why the main policy refused the current instance (reset)
         self.ack_timeout = ack_timeout
         self.restart_jump = restart_jump
         self.team: TeamSnapshot | None = None
@@ -304,7 +313,15 @@ class OnlineScheduler:
         if key != self._key or self._inst is None:
             self._inst = build_instance(self.team, self.graph)
             self._key = key
-            self.policy.reset(self._inst)
+            self._main_refused = ""
+            try:
+                self.policy.reset(self._inst)
+            except Exception as exc:  # a policy that cannot serve this instance: the fallback will
+                if self.fallback is None:
+                    raise
+                self._main_refused = f"{type(exc).__name__}: {exc}"
+            if self.fallback is not None:
+                self.fallback.reset(self._inst)
         return self._inst
 
     def decide(self) -> OnlineDecision | None:
@@ -333,9 +350,8 @@ class OnlineScheduler:
         """Run the policy on ``state`` (checked against Eqs. 8-11) and name the result."""
         inst = state.instance
         t0 = time.perf_counter()
-        decision: Decision = self.policy.decide(state)
+        decision, used = self._decide_with(state)
         latency = time.perf_counter() - t0
-        check_decision(state, decision, self.policy.name)
         assigned = {r for _, team in decision.assignments for r in team}
         out = OnlineDecision(
             self.step,
@@ -344,7 +360,28 @@ class OnlineScheduler:
             latency,
             self.team.stamp if self.team else state.time,
             self.graph.stamp if self.graph else state.time,
-            self.policy.name,
+            used,
         )
         self.step += 1
         return out
+
+    def _decide_with(self, state: State) -> tuple[Decision, str]:
+        """(decision, name of the policy that made it): the main policy, or the fallback
+        when the main one cannot serve this step (module doc)."""
+        reason = self._main_refused
+        if not reason:
+            try:
+                decision: Decision = self.policy.decide(state)
+                check_decision(state, decision, self.policy.name)
+                return decision, self.policy.name
+            except Exception as exc:  # whatever the main policy raises, the fallback serves the step
+                if self.fallback is None:
+                    raise
+                reason = f"{type(exc).__name__}: {exc}"
+        assert self.fallback is not None
+        decision = self.fallback.decide(state)
+        check_decision(state, decision, self.fallback.name)
+        self.fallbacks += 1
+        self.notices.append(f"step {self.step}: {self.policy.name} could not decide ({reason[:200]}); "
+                            f"decided with the fallback {self.fallback.name}")
+        return decision, self.fallback.name

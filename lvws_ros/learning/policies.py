@@ -23,6 +23,7 @@ import numpy as np
 from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, simulate
 from lvws_ros.core.matching import greedy_match
 from lvws_ros.core.problem import Instance
+from lvws_ros.errors import PolicyError
 from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint
 from lvws_ros.learning.features import InstanceFeatures
 from lvws_ros.learning.gatn import GATN, reward_matrix
@@ -58,7 +59,10 @@ class LVWSPolicy:
         forward pass, the reward MLP only on the entries the matching reads."""
         self.reset(state.instance)
         assert self._cache is not None
-        return reward_matrix(self.model, self._cache.encode(state))
+        r = reward_matrix(self.model, self._cache.encode(state))
+        if not np.isfinite(r).all():
+            raise PolicyError(f"{self.name}: the model gave non-finite rewards at t={state.time:g}")
+        return r
 
     def match(self, state: State, r: np.ndarray, subset: list[int] | None = None,
               idle_bias: float | None = None) -> Decision:
@@ -137,9 +141,30 @@ class DBGMPolicy:
         return Decision(tuple(out), tuple(free[a] for a in range(len(free)) if a not in used_r))
 
 
-def continue_after(state: State, decision: Decision, policy: Policy) -> float:
+class OutOfTime(Exception):
+    """A continuation passed its deadline (the rollout's budget)."""
+
+
+class _Until:
+    """``policy`` that raises OutOfTime at its first decision past ``deadline`` (perf_counter)."""
+
+    def __init__(self, policy: Policy, deadline: float) -> None:
+        self.policy, self.deadline = policy, deadline
+        self.name = getattr(policy, "name", "policy")
+
+    def reset(self, instance: Instance) -> None:
+        self.policy.reset(instance)
+
+    def decide(self, state: State) -> Decision:
+        if time.perf_counter() > self.deadline:
+            raise OutOfTime
+        return self.policy.decide(state)
+
+
+def continue_after(state: State, decision: Decision, policy: Policy, deadline: float | None = None) -> float:
     """Makespan when ``decision`` is taken in ``state`` and ``policy`` runs the rest
-    (inf if the decision would stall the schedule)."""
+    (inf if the decision would stall the schedule). OutOfTime when the continuation is
+    still running at ``deadline`` (a time.perf_counter() value)."""
     s = state.copy()
     for task, team in decision.assignments:
         s.start(task, team)
@@ -150,7 +175,8 @@ def continue_after(state: State, decision: Decision, policy: Policy) -> float:
     s.refresh()
     if s.done():
         return float(np.nanmax(s.task_end))
-    return float(simulate(state.instance, policy, state=s).schedule.makespan)
+    runner = policy if deadline is None else _Until(policy, deadline)
+    return float(simulate(state.instance, runner, state=s).schedule.makespan)
 
 
 class LVWSRolloutPolicy:
@@ -166,8 +192,10 @@ class LVWSRolloutPolicy:
     model, at the price of one or two simulated schedules per distinct candidate and step.
 
     ``budget_ms`` (anytime): candidates are scored in the order above until the budget
-    of the decision step is spent; the best scored so far wins (LVWS's own when none
-    was scored). None: no budget.
+    of the decision step is spent, and a continuation still running when it is spent is
+    abandoned (its candidate unscored); the best fully scored candidate wins, LVWS's own
+    when none was. The decision step then takes the budget plus at most one decision of
+    LVWS or GRP. None: no budget.
     """
 
     name = "lvws_rollout"
@@ -214,22 +242,25 @@ class LVWSRolloutPolicy:
                 out.append(d)
         return out
 
-    def score(self, state: State, decision: Decision) -> float:
-        makespan = continue_after(state, decision, self.base)
+    def score(self, state: State, decision: Decision, deadline: float | None = None) -> float:
+        makespan = continue_after(state, decision, self.base, deadline)
         if self.finish_with_grp:
-            makespan = min(makespan, continue_after(state, decision, self.grp))
+            makespan = min(makespan, continue_after(state, decision, self.grp, deadline))
         return makespan
 
     def decide(self, state: State) -> Decision:
-        t0 = time.perf_counter()
+        deadline = None if self.budget_ms is None else time.perf_counter() + self.budget_ms / 1000
         candidates = self.candidates(state)
         if len(candidates) == 1:
             return candidates[0]
         best, best_score = candidates[0], math.inf
         for d in candidates:
-            if self.budget_ms is not None and 1000 * (time.perf_counter() - t0) > self.budget_ms:
+            if deadline is not None and time.perf_counter() > deadline:
                 break
-            score = self.score(state, d)
+            try:
+                score = self.score(state, d, deadline)
+            except OutOfTime:
+                break
             if score < best_score:
                 best, best_score = d, score
         return best

@@ -8,8 +8,10 @@ whenever a robot becomes available or a task becomes ready. A thin shell over
 a second and on every error.
 
 Parameters: policy (lvws | lvws_rollout | dbgm | grp | rand | rand_subteam | exact;
-default lvws), model_path ("" = the shipped checkpoint), seed, ack_timeout, expect_subscribers (the first
-decision waits until this many nodes subscribe to the assignments, default 0), use_sim_time.
+default lvws), fallback_policy (default grp; "" for none: decides a step the main policy
+cannot serve, with a WARN on /diagnostics), model_path ("" = the shipped checkpoint), seed,
+ack_timeout, expect_subscribers (the first decision waits until this many nodes subscribe
+to the assignments, default 0), use_sim_time.
 """
 
 from __future__ import annotations
@@ -42,7 +44,8 @@ DESCRIPTION = (
 )
 DEFAULT_POLICY = "lvws"
 # name -> (type, default); the ones a params file may set
-PARAMETERS: dict[str, tuple[type, object]] = {"policy": (str, DEFAULT_POLICY), "model_path": (str, ""),
+PARAMETERS: dict[str, tuple[type, object]] = {"policy": (str, DEFAULT_POLICY), "fallback_policy": (str, "grp"),
+                                              "model_path": (str, ""),
                                               "seed": (int, 0), "ack_timeout": (float, 5.0),
                                               "expect_subscribers": (int, 0), "use_sim_time": (bool, False)}
 SUBSCRIBER_WAIT = 20.0  # wall seconds the first decision waits for expect_subscribers
@@ -77,8 +80,9 @@ def check_params_file(path: str | Path, node: str = "scheduler") -> dict[str, An
         if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
             if not (kind is float and isinstance(value, int) and not isinstance(value, bool)):
                 raise ConfigError(f"{p}: {node}.{name}: expected {kind.__name__}, got {value!r}")
-    if "policy" in params and params["policy"] not in POLICY_NAMES:
-        raise ConfigError(f"{p}: {node}.policy: unknown {params['policy']!r}; one of {', '.join(POLICY_NAMES)}")
+    for key in ("policy", "fallback_policy"):
+        if key in params and params[key] not in POLICY_NAMES and not (key == "fallback_policy" and params[key] == ""):
+            raise ConfigError(f"{p}: {node}.{key}: unknown {params[key]!r}; one of {', '.join(POLICY_NAMES)}")
     if params.get("model_path") and not Path(params["model_path"]).is_file():
         raise ConfigError(f"{p}: {node}.model_path: no such file {params['model_path']!r}")
     return params
@@ -88,6 +92,7 @@ class SchedulerNode(Node):
     def __init__(self) -> None:
         super().__init__("scheduler")
         self.policy_name = str(self.declare_parameter("policy", DEFAULT_POLICY).value)
+        fallback = str(self.declare_parameter("fallback_policy", "grp").value)
         model_path = str(self.declare_parameter("model_path", "").value)
         self.seed = int(self.declare_parameter("seed", 0).value)
         ack_timeout = float(self.declare_parameter("ack_timeout", 5.0).value)
@@ -97,8 +102,11 @@ class SchedulerNode(Node):
         self.started_at = time.monotonic()
         if self.policy_name not in POLICY_NAMES:
             raise LvwsError(f"parameter policy: unknown {self.policy_name!r}; one of {', '.join(POLICY_NAMES)}")
+        if fallback and fallback not in POLICY_NAMES:
+            raise LvwsError(f"parameter fallback_policy: unknown {fallback!r}; one of {', '.join(POLICY_NAMES)} or ''")
         options = {"model_path": model_path} if self.policy_name in LEARNED_POLICIES else {}
-        self.core = OnlineScheduler(make_policy(self.policy_name, seed=self.seed, **options), ack_timeout)
+        self.core = OnlineScheduler(make_policy(self.policy_name, seed=self.seed, **options), ack_timeout,
+                                    fallback=make_policy(fallback, seed=self.seed) if fallback else None)
         self.pub = self.create_publisher(AssignmentArray, topics.ASSIGNMENTS_TOPIC, topics.ASSIGNMENTS_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, topics.DIAGNOSTICS_QOS)
         self.create_subscription(TeamState, topics.TEAM_TOPIC, self.on_team, topics.TEAM_QOS)
@@ -210,7 +218,7 @@ class SchedulerNode(Node):
             ("policy", self.policy_name), ("seed", self.seed), ("decisions", self.core.step),
             ("last_latency_ms", f"{1000 * self.last_latency:.3f}"), ("messages", self.received),
             ("out_of_order_dropped", self.core.dropped), ("world_restarts", self.core.restarts),
-            ("pending", len(self.core.pending)))]
+            ("pending", len(self.core.pending)), ("fallback_steps", self.core.fallbacks))]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)

@@ -9,7 +9,7 @@ import pytest
 
 from conftest import CASE_STUDY
 from lvws_ros.core.online import OnlineScheduler, RobotInfo, TaskInfo
-from lvws_ros.errors import InstanceError
+from lvws_ros.errors import InstanceError, PolicyError
 from lvws_ros.registry import make_policy
 from lvws_ros.sim.config import load_cell_config
 from lvws_ros.sim.world import CellSim
@@ -238,3 +238,35 @@ def test_a_world_restart_drops_the_old_worlds_snapshots():
     assert online.offer_graph(dataclasses.replace(graph, stamp=1.0))
     d = online.decide()
     assert d is not None and d.graph_stamp == 1.0
+
+
+class Refusing:
+    """A policy that cannot serve anything (as a model past its limits would)."""
+
+    name = "refusing"
+
+    def __init__(self, at: str) -> None:
+        self.at = at
+
+    def reset(self, instance):
+        if self.at == "reset":
+            raise PolicyError("this model handles at most 3 capabilities")
+
+    def decide(self, state):
+        raise PolicyError("non-finite rewards")
+
+
+@pytest.mark.parametrize("at", ["reset", "decide"])
+def test_the_fallback_decides_when_the_main_policy_cannot_and_says_so(at):
+    sim = CellSim(load_cell_config(CASE_STUDY))
+    online = OnlineScheduler(Refusing(at), fallback=make_policy("grp"))
+    online.offer_team(sim.team_snapshot())
+    online.offer_graph(sim.graph_snapshot())
+    d = online.decide()
+    assert d is not None and d.policy == "grp" and d.assignments
+    assert online.fallbacks == 1 and any("fallback grp" in n and "refusing" in n for n in online.notices)
+    bare = OnlineScheduler(Refusing(at))
+    bare.offer_team(sim.team_snapshot())
+    bare.offer_graph(sim.graph_snapshot())
+    with pytest.raises(PolicyError):
+        bare.decide()

@@ -103,3 +103,18 @@ def test_untrained_learned_policies_still_give_valid_schedules(bias):
         inst = random_instance(rng, int(rng.integers(1, 9)), int(rng.integers(1, 21)), "u")
         for policy in (lvws, dbgm):
             assert check_schedule(inst, simulate(inst, policy).schedule) == []
+
+
+def test_rollout_budget_zero_is_lvws_and_no_budget_is_never_worse():
+    from lvws_ros.learning.policies import LVWSRolloutPolicy
+
+    torch.manual_seed(2)
+    model = GATN(GATNConfig(hidden=16, mlp_hidden=16))
+    lvws = LVWSPolicy(model=model, idle_bias=NO_VOLUNTARY_WAIT)
+    for k in range(4):
+        inst = dataset_instance(DATASETS["I"], k, seed=3)
+        base = simulate(inst, lvws).schedule
+        rushed = simulate(inst, LVWSRolloutPolicy(model=model, budget_ms=0.0)).schedule
+        assert sorted(map(str, rushed.assignments)) == sorted(map(str, base.assignments))
+        full = simulate(inst, LVWSRolloutPolicy(model=model)).schedule
+        assert check_schedule(inst, full) == [] and full.makespan <= base.makespan + 1e-9
