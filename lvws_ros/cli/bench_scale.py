@@ -12,6 +12,7 @@ nothing asserted.
 
 from __future__ import annotations
 
+import gc
 import json
 import statistics
 import subprocess
@@ -90,9 +91,12 @@ def bench_whole_schedules(seed: int, limit: float) -> None:
                           f"{r['makespan']:g} | {'yes' if r['valid'] else 'NO'} | {r['peak_mib']:.0f} |", flush=True)
 
 
-def node_latency(policy: str, family: str, n: int, m: int, seed: int) -> list[float]:
+def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: bool = True) -> list[float]:
     """Seconds per decision of the scheduler node's work (both messages converted to
-    snapshots, OnlineScheduler.decide), at each decision step of a whole run."""
+    snapshots, OnlineScheduler.decide), at each decision step of a whole run; after a
+    warm-up run on a small instance (a running node has made decisions before)."""
+    if warm_up:
+        node_latency(policy, family, 10, 20, seed + 1, warm_up=False)
     from lvws_ros.core.executor import State, TaskStatus
     from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot
     from lvws_ros.registry import make_policy
@@ -100,6 +104,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int) -> list[fl
 
     inst = make_instance(family, n, m, seed)
     online = OnlineScheduler(make_policy(policy, seed=seed), ack_timeout=1e9)
+    gc.freeze()  # as the scheduler node does after start-up
     state = State.initial(inst)
     names = tuple(inst.capabilities)
     lat: list[float] = []

@@ -43,7 +43,7 @@ class Family:
 
 
 FAMILIES = {
-    "mixed": Family("mixed", 11, False, "training mixture: K 1-8, 2-20 robots, 5-40 tasks, 7 DAG shapes"),
+    "mixed": Family("mixed", 11, False, "training mixture: K 1-8, 3-20 robots, 5-40 tasks, 7 DAG shapes"),
     "assembly": Family("assembly", 12, True, "held out: assembly in-trees, specialists, kg payloads, float durations"),
     "mspsp": Family("mspsp", 13, True, "held out: multi-skill project scheduling (unit workers, K 4-8)"),
 }

@@ -218,8 +218,9 @@ class LVWSRolloutPolicy:
         self.base.reset(instance)
         self.grp.reset(instance)
 
-    def candidates(self, state: State) -> list[Decision]:
-        """Distinct candidate decisions, LVWS's own first."""
+    def candidates(self, state: State, deadline: float | None = None) -> list[Decision]:
+        """Distinct candidate decisions, LVWS's own first; past ``deadline`` (perf_counter)
+        no further one is made (the left-out ones: one per free robot, at fleet scale)."""
         free = state.free_robots()
         if not free or not state.ready_tasks():
             return [Decision((), tuple(free))]
@@ -232,6 +233,8 @@ class LVWSRolloutPolicy:
                                    tuple(sorted({*first.waiting, *held[1]}))) for held in first.assignments]
         if self.exclude and len(free) > 1:
             for x in free:
+                if deadline is not None and time.perf_counter() > deadline:
+                    break
                 d = self.base.match(state, r, [i for i in free if i != x])  # x waits
                 proposals.append(Decision(d.assignments, tuple(sorted({x, *d.waiting}))))
         out = [first]
@@ -250,7 +253,7 @@ class LVWSRolloutPolicy:
 
     def decide(self, state: State) -> Decision:
         deadline = None if self.budget_ms is None else time.perf_counter() + self.budget_ms / 1000
-        candidates = self.candidates(state)
+        candidates = self.candidates(state, deadline)
         if len(candidates) == 1:
             return candidates[0]
         best, best_score = candidates[0], math.inf

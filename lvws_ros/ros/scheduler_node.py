@@ -17,6 +17,7 @@ to the assignments, default 0), use_sim_time.
 from __future__ import annotations
 
 import argparse
+import gc
 import sys
 import time
 import traceback
@@ -121,6 +122,10 @@ class SchedulerNode(Node):
         self.last_latency = 0.0
         self.received = 0
         self.get_logger().info(f"policy {self.policy_name}, seed {self.seed}, model {model_path or 'shipped'}")
+        # The start-up objects (torch, rclpy, the model) live as long as the node: freezing
+        # them keeps a full garbage collection from pausing a decision (100 x 500: p99 of the
+        # decision latency 48 -> 37 ms, docs/scale.md).
+        gc.freeze()
 
     def on_team(self, msg: TeamState) -> None:
         self.guarded(lambda: self.offer("TeamState", lambda: self.core.offer_team(convert.team_from_msg(msg))))
