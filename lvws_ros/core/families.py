@@ -107,6 +107,14 @@ def _instance(name: str, k: int, robot_caps: np.ndarray, robot_payload: np.ndarr
     return Instance(name, tuple(f"c{c}" for c in range(k)), robots, tasks)
 
 
+def _specialists(rng: np.random.Generator, n: int, k: int, most: int) -> np.ndarray:
+    """(n, k) capability vectors: each robot holds 1..``most`` of the k capabilities."""
+    caps = np.zeros((n, k), dtype=bool)
+    for i in range(n):
+        caps[i, rng.choice(k, size=int(rng.integers(1, most + 1)), replace=False)] = True
+    return caps
+
+
 def _task_caps(rng: np.random.Generator, m: int, k: int, most: int) -> np.ndarray:
     caps = np.zeros((m, k), dtype=bool)
     for j in range(m):
@@ -141,9 +149,7 @@ def assembly_instance(rng: np.random.Generator, name: str, num_robots: int = 6, 
     """One instance of the held-out assembly family (module docstring)."""
     k = int(rng.integers(4, 7))
     n, m = num_robots, num_tasks
-    robot_caps = np.zeros((n, k), dtype=bool)
-    for i in range(n):
-        robot_caps[i, rng.choice(k, size=int(rng.integers(1, 3)), replace=False)] = True
+    robot_caps = _specialists(rng, n, k, 2)
     robot_caps[rng.permutation(n)[:k] if n >= k else rng.integers(n, size=k), np.arange(k)] = True
     robot_payload = rng.uniform(5, 50, size=n).round(1)
     task_payload = rng.lognormal(np.log(25), 0.8, size=m).round(1)
@@ -163,9 +169,7 @@ def mspsp_instance(rng: np.random.Generator, name: str, num_robots: int = 6, num
     """One instance of the held-out multi-skill project scheduling family (module docstring)."""
     k = int(rng.integers(4, 9))
     n, m = num_robots, num_tasks
-    robot_caps = np.zeros((n, k), dtype=bool)
-    for i in range(n):
-        robot_caps[i, rng.choice(k, size=int(rng.integers(1, 4)), replace=False)] = True
+    robot_caps = _specialists(rng, n, k, 3)
     for c in np.flatnonzero(~robot_caps.any(axis=0)):
         robot_caps[rng.integers(n), c] = True
     task_caps = _task_caps(rng, m, k, 2)

@@ -4,21 +4,13 @@ fallback policy (grp), and /diagnostics says so (WARN)."""
 
 from __future__ import annotations
 
-import signal
-import subprocess
-import sys
-import time
-from collections.abc import Callable
-
 import pytest
-import rclpy
 import torch
-from lvws_msgs.msg import AssignmentArray, RobotState, Task, TaskGraph, TeamState
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from lvws_msgs.msg import RobotState, Task, TaskGraph, TeamState
 
 from lvws_ros.learning.checkpoint import save_checkpoint
 from lvws_ros.learning.gatn import GATN, GATNConfig
-from lvws_ros.ros.topics import GRAPH_QOS, TEAM_QOS, message_class
+from scheduler_probe import scheduler_probe
 
 pytestmark = pytest.mark.ros
 
@@ -43,39 +35,16 @@ def test_a_model_that_cannot_serve_gives_way_to_the_fallback(ros_context, tmp_pa
         model.psi_out[-1].bias.fill_(float("nan"))  # every reward NaN
     broken = tmp_path / "nan.pt"
     save_checkpoint(broken, model, {"kind": "lvws", "idle_bias": 0.0})
-    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", "-p", "policy:=lvws",
-                             "-p", f"model_path:={broken}"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
-    node = rclpy.create_node("lvws_fallback_test", context=ros_context)
-    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    got: list[AssignmentArray] = []
-    diags: list[str] = []
-    try:
-        team_pub = node.create_publisher(TeamState, "/lvws/team_state", TEAM_QOS)
-        graph_pub = node.create_publisher(TaskGraph, "/lvws/task_graph", GRAPH_QOS)
-        node.create_subscription(AssignmentArray, "/lvws/assignments", got.append,
-                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-        node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics",
-                                 lambda m: diags.extend(f"{s.level[0]}:{s.message}" for s in m.status),
-                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-
-        def spin(seconds: float, until: Callable[[], bool]) -> None:
-            end = time.monotonic() + seconds
-            while time.monotonic() < end and not until():
-                executor.spin_once(timeout_sec=0.05)
-
-        spin(60, lambda: team_pub.get_subscription_count() > 0 and graph_pub.get_subscription_count() > 0)
-        spin(20, lambda: bool(diags))
+    with scheduler_probe(ros_context, "lvws_fallback_test", ["-p", "policy:=lvws", "-p",
+                                                             f"model_path:={broken}"]) as probe:
+        probe.wait_for_scheduler()
+        probe.spin(20, lambda: bool(probe.diags))
         team, graph = snapshots(10)
-        team_pub.publish(team)
-        graph_pub.publish(graph)
-        spin(30, lambda: bool(got) and any("fallback grp" in d for d in diags))
+        probe.team_pub.publish(team)
+        probe.graph_pub.publish(graph)
+        probe.spin(30, lambda: bool(probe.got) and any("fallback grp" in d for d in probe.diags))
+        got, diags = probe.got, probe.diags
         assert got and got[0].policy == "grp" and got[0].assignments, (got, diags[-5:])
         assert any(d.startswith("1:") and "fallback grp" in d and "non-finite" in d for d in diags), diags[-5:]
-        assert proc.poll() is None
-    finally:
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-        node.destroy_node()
-    assert "Traceback" not in out, out
+        assert probe.proc.poll() is None
+    assert "Traceback" not in probe.output, probe.output

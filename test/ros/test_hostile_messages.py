@@ -4,18 +4,12 @@ reports the problem on /diagnostics, and then decides the next valid state."""
 
 from __future__ import annotations
 
-import signal
-import subprocess
-import sys
-import time
 from collections.abc import Callable
 
 import pytest
-import rclpy
-from lvws_msgs.msg import AssignmentArray, RobotState, Task, TaskGraph, TeamState
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from lvws_msgs.msg import RobotState, Task, TaskGraph, TeamState
 
-from lvws_ros.ros.topics import GRAPH_QOS, TEAM_QOS, message_class
+from scheduler_probe import scheduler_probe
 
 pytestmark = pytest.mark.ros
 
@@ -70,36 +64,18 @@ SCENARIOS = [
 
 @pytest.mark.parametrize("policy", ["grp", "lvws"])
 def test_hostile_messages_change_nothing(ros_context, policy):
-    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", "-p",
-                             f"policy:={policy}", "-p", "ack_timeout:=60.0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    node = rclpy.create_node("lvws_hostile", context=ros_context)
-    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    got: list[AssignmentArray] = []
-    diags: list[str] = []
-    try:
-        pubs = {"team": node.create_publisher(TeamState, "/lvws/team_state", TEAM_QOS),
-                "graph": node.create_publisher(TaskGraph, "/lvws/task_graph", GRAPH_QOS)}
-        node.create_subscription(AssignmentArray, "/lvws/assignments", got.append,
-                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-        node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics",
-                                 lambda m: diags.extend(f"{s.level[0]}:{s.message}" for s in m.status),
-                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-
-        def spin(seconds: float, until: Callable[[], bool] = lambda: False) -> None:
-            end = time.monotonic() + seconds
-            while time.monotonic() < end and not until():
-                executor.spin_once(timeout_sec=0.05)
-
-        spin(60, lambda: pubs["team"].get_subscription_count() > 0 and pubs["graph"].get_subscription_count() > 0)
+    with scheduler_probe(ros_context, "lvws_hostile", ["-p", f"policy:={policy}", "-p",
+                                                       "ack_timeout:=60.0"]) as probe:
+        pubs = {"team": probe.team_pub, "graph": probe.graph_pub}
+        got, diags, spin = probe.got, probe.diags, probe.spin
+        probe.wait_for_scheduler()
         spin(3 if policy == "grp" else 10, lambda: bool(diags))  # the node is up and reporting
         stamp = 10
         for name, hostile, words in SCENARIOS:
             for topic, msg in hostile(stamp):
                 pubs[topic].publish(msg)
                 spin(0.3)
-            assert proc.poll() is None, f"{name}: the node died\n{proc.communicate()[0]}"
+            assert probe.proc.poll() is None, f"{name}: the node died\n{probe.proc.communicate()[0]}"
             stamp += 10
             valid_tag = f"ok{stamp}"
             before = len(got)
@@ -115,9 +91,5 @@ def test_hostile_messages_change_nothing(ros_context, policy):
             for m in got:  # never an unready task, nor anything of a refused graph
                 assert not {a.task_id for a in m.assignments} & {"u1", "s0", "s1"}, name
             stamp += 10
-        assert proc.poll() is None
-    finally:
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-        node.destroy_node()
-    assert "Traceback" not in out, out
+        assert probe.proc.poll() is None
+    assert "Traceback" not in probe.output, probe.output

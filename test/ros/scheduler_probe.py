@@ -1,0 +1,64 @@
+"""A scheduler node in its own process and a test node that talks to it over DDS: the
+publishers of team and graph, the assignments and /diagnostics it receives (as
+"<level>:<message>" strings), and a spin that stops when a condition holds."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import rclpy
+from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from lvws_ros.ros.topics import GRAPH_QOS, TEAM_QOS, message_class
+
+
+@dataclass
+class Probe:
+    proc: subprocess.Popen[str]
+    executor: Any
+    team_pub: Any
+    graph_pub: Any
+    got: list[AssignmentArray] = field(default_factory=list)
+    diags: list[str] = field(default_factory=list)
+    output: str = ""  # the node's stdout and stderr, once it has stopped
+
+    def spin(self, seconds: float, until: Callable[[], bool] = lambda: False) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and not until():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def wait_for_scheduler(self, seconds: float = 60.0) -> None:
+        """Until the node subscribes to team and graph."""
+        self.spin(seconds, lambda: self.team_pub.get_subscription_count() > 0
+                  and self.graph_pub.get_subscription_count() > 0)
+
+
+@contextmanager
+def scheduler_probe(ros_context: Any, name: str, ros_args: Sequence[str]) -> Iterator[Probe]:
+    """``python -m lvws_ros.ros.scheduler_node --ros-args *ros_args`` and a test node
+    ``name``; SIGINT to the scheduler on the way out (its output in ``probe.output``)."""
+    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", *ros_args],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    node = rclpy.create_node(name, context=ros_context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    probe = Probe(proc, executor, node.create_publisher(TeamState, "/lvws/team_state", TEAM_QOS),
+                  node.create_publisher(TaskGraph, "/lvws/task_graph", GRAPH_QOS))
+    node.create_subscription(AssignmentArray, "/lvws/assignments", probe.got.append, reliable)
+    node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics",
+                             lambda m: probe.diags.extend(f"{s.level[0]}:{s.message}" for s in m.status), reliable)
+    try:
+        yield probe
+    finally:
+        proc.send_signal(signal.SIGINT)
+        probe.output, _ = proc.communicate(timeout=30)
+        node.destroy_node()
