@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from lvws_ros.core.datasets import random_instance
 from lvws_ros.core.executor import simulate
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import check_schedule
+from lvws_ros.learning.features import GraphFeatures, encode_state
+from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 # A valid lvws-instance/1 document: three tasks, a subteam needed for t0, a robot with an extra key.
 BASE = {
@@ -60,3 +63,12 @@ def plan(policy, inst):
     sched = simulate(inst, policy).schedule
     assert check_schedule(inst, sched) == []
     return sorted((a.task, a.start, tuple(sorted(a.robots))) for a in sched.assignments)
+
+
+def features_at(seed: int, n: int, m: int, step: int = 1) -> GraphFeatures:
+    """The model's features of a random n x m instance at GRP's ``step``-th decision."""
+    inst = random_instance(np.random.default_rng(seed), n, m, "f")
+    run = simulate(inst, GreedyPayloadPolicy(), record_states=True)
+    state = run.steps[min(step, len(run.steps) - 1)].state
+    assert state is not None
+    return encode_state(state)

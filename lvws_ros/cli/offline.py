@@ -151,9 +151,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     from lvws_ros.learning.gatn import GATNConfig
     from lvws_ros.learning.training import PipelineConfig, TrainConfig, run_pipeline
 
-    model_cfg = GATNConfig(hidden=args.hidden, use_transformer=not args.dbgm)
+    model_cfg = GATNConfig(hidden=args.hidden, use_transformer=not args.dbgm,
+                           wait_head=args.wait_head and not args.dbgm)
     train_cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, lam=args.lam,
-                            choice_weight=args.choice_weight, seed=args.seed, dbgm=args.dbgm, model=model_cfg)
+                            choice_weight=args.choice_weight, seed=args.seed, dbgm=args.dbgm,
+                            wait_weight=args.wait_weight, model=model_cfg)
     datasets = tuple(d for d in args.datasets.split(",") if d)
     unknown = [d for d in datasets if d not in ("I", "II")]
     if unknown:
@@ -253,6 +255,9 @@ def _add_train(add: Adder) -> None:
     p.add_argument("--choice-weight", type=float, default=1.0, help="per-robot choice term; 0: Eq. 12 alone")
     p.add_argument("--hidden", type=int, default=64)
     p.add_argument("--dbgm", action="store_true", help="the DBGM-style baseline: GAT only, no idle task")
+    p.add_argument("--wait-head", action=argparse.BooleanOptionalAction, default=True,
+                   help="learn voluntary waiting with a wait head (added to an --init model without one)")
+    p.add_argument("--wait-weight", type=float, default=1.0, help="weight of the wait head's term")
     p.add_argument("--dagger-rounds", type=int, default=2)
     p.add_argument("--dagger-instances", type=int, default=1500)
     p.add_argument("--dagger-epochs", type=int, default=6)

@@ -107,11 +107,11 @@ def _training_section(meta: dict[str, Any]) -> list[str]:
         "training (mean suboptimality against the best schedule CP-SAT finds in 10 s). A DAgger round is kept "
         "only when validation improves; the idle bias is the best on validation.",
         "",
-        "| stage | demonstration states | best idle bias | validation suboptimality |",
-        "|---|---|---|---|",
-        *[f"| {st['stage']} | {st['states']} | {_bias(st['idle_bias'])} | {st['validation_suboptimality']:.2f} % |"
-          for st in lv.get("stages", [])],
-        f"| DBGM (GAT only) | {meta['dbgm'].get('stages', [{}])[0].get('states', '?')} | — | "
+        "| stage | demonstration states | best idle bias | best wait threshold | validation suboptimality |",
+        "|---|---|---|---|---|",
+        *[f"| {st['stage']} | {st['states']} | {_bias(st['idle_bias'])} | {_threshold(st.get('wait_threshold'))} | "
+          f"{st['validation_suboptimality']:.2f} % |" for st in lv.get("stages", [])],
+        f"| DBGM (GAT only) | {meta['dbgm'].get('stages', [{}])[0].get('states', '?')} | — | — | "
         f"{meta['dbgm'].get('validation_suboptimality', math.nan):.2f} % |",
         "",
         "LVWS + rollout (ours, beyond the paper): at each decision step the candidates are LVWS's matching, "
@@ -219,9 +219,11 @@ def _waiting_section(cols: dict[str, Column], policies: Sequence[str], shares: d
 
 def _waiting_ablation(cols: dict[str, Column], meta: dict[str, Any]) -> list[str]:
     keys = ["I", "II", *TRAINING_FAMILIES, *HELD_OUT_FAMILIES]
-    rows = [("lvws", f"LVWS as shipped (idle bias {_bias(meta['lvws'].get('idle_bias', 0.0))})"),
-            ("lvws_raw_idle", "LVWS, the network's idle column as it is (bias 0)"),
-            ("lvws_no_wait", "LVWS, no voluntary waiting")]
+    rows = [("lvws", f"LVWS as shipped (idle bias {_bias(meta['lvws'].get('idle_bias', 0.0))}, "
+                     f"wait threshold {_threshold(meta['lvws'].get('wait_threshold'))})"),
+            ("lvws_no_head", "LVWS without its wait head (threshold off)"),
+            ("lvws_raw_idle", "LVWS, the network's idle column as it is (bias 0), no wait head"),
+            ("lvws_no_wait", "LVWS, no voluntary waiting (neither)")]
     return [
         "",
         "## Voluntary waiting ablation — suboptimality % (share of decision steps with a voluntary wait %)",
@@ -249,8 +251,9 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
     if "lvws" in policies:  # the voluntary-waiting ablation
         from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, LVWSPolicy
 
-        runners = {**runners, "lvws_no_wait": LVWSPolicy(idle_bias=NO_VOLUNTARY_WAIT),
-                   "lvws_raw_idle": LVWSPolicy(idle_bias=0.0)}
+        runners = {**runners, "lvws_no_wait": LVWSPolicy(idle_bias=NO_VOLUNTARY_WAIT, wait_threshold=None),
+                   "lvws_raw_idle": LVWSPolicy(idle_bias=0.0, wait_threshold=None),
+                   "lvws_no_head": LVWSPolicy(wait_threshold=None)}
     cols = {}
     for key in ("I", "II"):
         insts = test_split(key, data_seed, limit)
@@ -309,6 +312,10 @@ def expert_voluntary_share(instances: Sequence[Instance], time_limit: float, wor
 
 def _bias(b: float) -> str:
     return "no voluntary waiting" if b <= -1e5 else f"{b:g}"
+
+
+def _threshold(t: float | None) -> str:
+    return "off" if t is None else f"{t:g}"
 
 
 def _cores() -> int:

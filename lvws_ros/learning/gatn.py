@@ -16,6 +16,11 @@
   R_ij = psi(h_i^r || h_j^t || g^r || g^t || p_ij) with our pair features p_ij, computed
   only for the entries a decision reads (free robots x ready tasks and the idle task).
   ``use_transformer=False`` gives the DBGM-style GAT-only network (g = 0).
+* The wait head (``wait_head=True``, ours, beyond the paper): a logit per free robot that
+  it should wait voluntarily, from the hidden layer of Eq. 6's MLP at the robot's idle
+  entry and its element-wise max over the robot's ready-task entries (what it would give
+  up). The paper learns waiting only through the idle column of R; that column competes
+  with every task entry of its row, and our calibration never found it worth using.
 
 Graphs of a batch are flattened (robots padded per graph for the dense robot GAT,
 tasks concatenated with a graph index), so one batch mixes any sizes; everything is
@@ -50,6 +55,7 @@ class GATNConfig:
     transformer_heads: int = 4
     mlp_hidden: int = 64
     use_transformer: bool = True
+    wait_head: bool = False
 
     def to_dict(self) -> dict[str, int | bool]:
         return asdict(self)
@@ -205,6 +211,8 @@ class GATN(nn.Module):
         self.psi_g = nn.Linear(2 * d, hid, bias=False)
         self.psi_p = nn.Linear(PAIR_FEATURES, hid, bias=False)
         self.psi_out = nn.Sequential(nn.ReLU(), nn.Linear(hid, hid), nn.ReLU(), nn.Linear(hid, 1))
+        self.wait = nn.Sequential(nn.Linear(2 * hid, hid), nn.ReLU(), nn.Linear(hid, 1)) if self.cfg.wait_head \
+            else None
 
     def encode(self, batch: Batch) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """(h_r flat over real robots, h_t flat, g_r, g_t)."""
@@ -222,25 +230,54 @@ class GATN(nn.Module):
         g_t, ht = enc.run_globals(ht, batch.task_graph, b)
         return hr_flat, ht, g_r, g_t
 
-    def forward(self, batch: Batch) -> Tensor:
-        """(number of entries,) rewards, in the order of ``batch.entry_*``."""
+    def _hidden(self, batch: Batch) -> Tensor:
+        """(entries, mlp_hidden): the first layer of Eq. 6's MLP psi, before its ReLU."""
         hr, ht, g_r, g_t = self.encode(batch)
         g = self.psi_g(torch.cat([g_r, g_t], dim=-1))
-        z = self.psi_r(hr)[batch.entry_robot] + self.psi_t(ht)[batch.entry_task] + g[batch.entry_graph] \
+        return self.psi_r(hr)[batch.entry_robot] + self.psi_t(ht)[batch.entry_task] + g[batch.entry_graph] \
             + self.psi_p(batch.entry_pairs)
-        return self.psi_out(z).squeeze(-1)
 
-    def rewards_one(self, batch: Batch, rows: int, cols: int) -> Tensor:
+    def forward(self, batch: Batch) -> Tensor:
+        """(number of entries,) rewards, in the order of ``batch.entry_*``."""
+        return self.psi_out(self._hidden(batch)).squeeze(-1)
+
+    def forward_with_wait(self, batch: Batch) -> tuple[Tensor, Tensor | None]:
+        """(rewards of the entries, wait logits of the rows or None without a wait head)."""
+        z = self._hidden(batch)
+        r = self.psi_out(z).squeeze(-1)
+        if self.wait is None:
+            return r, None
+        return r, self._wait_logits(torch.relu(z), batch.entry_row, batch.entry_idle, batch.rows)
+
+    def _wait_logits(self, zr: Tensor, row: Tensor, idle: Tensor, rows: int) -> Tensor:
+        assert self.wait is not None
+        at_idle = zr.new_zeros((rows, zr.shape[1])).index_copy_(0, row[idle], zr[idle])
+        tasks = ~idle
+        best = zr.new_zeros((rows, zr.shape[1])).scatter_reduce_(0, row[tasks, None].expand(-1, zr.shape[1]),
+                                                                 zr[tasks], "amax", include_self=True)
+        return self.wait(torch.cat([at_idle, best], dim=-1)).squeeze(-1)
+
+    def rewards_one(self, batch: Batch, rows: int, cols: int) -> tuple[Tensor, Tensor | None]:
         """(rows, cols) rewards of a one-graph batch whose entries are its rows x cols,
-        computed by broadcasting in chunks of rows (bounded memory at fleet scale)."""
+        computed by broadcasting in chunks of rows (bounded memory at fleet scale), and
+        the (rows,) wait logits (None without a wait head)."""
         hr, ht, g_r, g_t = self.encode(batch)
         pr = self.psi_r(hr)[batch.entry_robot.view(rows, cols)[:, 0]] if cols else hr[:0]
         pt = self.psi_t(ht)[batch.entry_task[:cols]] + self.psi_g(torch.cat([g_r, g_t], dim=-1))[0]
         pairs = batch.entry_pairs.view(rows, cols, -1)
         step = max(1, ENTRY_CHUNK // max(cols, 1))
-        out = [self.psi_out(pr[a:a + step, None, :] + pt[None, :, :] + self.psi_p(pairs[a:a + step])).squeeze(-1)
-               for a in range(0, rows, step)]
-        return torch.cat(out, dim=0) if out else torch.zeros((0, cols))
+        out, waits = [], []
+        for a in range(0, rows, step):
+            z = pr[a:a + step, None, :] + pt[None, :, :] + self.psi_p(pairs[a:a + step])
+            out.append(self.psi_out(z).squeeze(-1))
+            if self.wait is not None:
+                zr = torch.relu(z)  # the idle entry is the last column
+                best = zr[:, :-1].amax(dim=1) if cols > 1 else torch.zeros_like(zr[:, 0])
+                waits.append(self.wait(torch.cat([zr[:, -1], best], dim=-1)).squeeze(-1))
+        r = torch.cat(out, dim=0) if out else torch.zeros((0, cols))
+        if self.wait is None:
+            return r, None
+        return r, torch.cat(waits) if waits else torch.zeros(0)
 
 
 @dataclass
@@ -297,9 +334,10 @@ def collate(graphs: Sequence[GraphFeatures]) -> Batch:
                  cat("eidle", np.bool_, (0,)), row_off)
 
 
-def reward_matrix(model: GATN, features: GraphFeatures) -> np.ndarray:
+def decision_outputs(model: GATN, features: GraphFeatures) -> tuple[np.ndarray, np.ndarray | None]:
     """One forward pass for one decision step: R of Eq. 6 as a (len(rows), len(cols))
-    matrix, the free robots x the ready tasks and (last column) the idle task.
+    matrix, the free robots x the ready tasks and (last column) the idle task; and each
+    free robot's probability of waiting voluntarily (None without a wait head).
 
     Runs on INFERENCE_THREADS intra-op threads: a decision's tensors are small, and
     torch's thread pool, when the other cores are busy (a simulator, DDS, CP-SAT),
@@ -309,6 +347,13 @@ def reward_matrix(model: GATN, features: GraphFeatures) -> np.ndarray:
     try:
         with torch.inference_mode():
             r, c = len(features.rows), len(features.cols)
-            return model.rewards_one(collate([features]), r, c).numpy().astype(np.float64)
+            rewards, wait = model.rewards_one(collate([features]), r, c)
+            return (rewards.numpy().astype(np.float64),
+                    None if wait is None else torch.sigmoid(wait).numpy().astype(np.float64))
     finally:
         torch.set_num_threads(threads)
+
+
+def reward_matrix(model: GATN, features: GraphFeatures) -> np.ndarray:
+    """R of :func:`decision_outputs` alone."""
+    return decision_outputs(model, features)[0]

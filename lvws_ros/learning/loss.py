@@ -22,7 +22,7 @@ from lvws_ros.core.subteams import BoolArray, FloatArray, helps
 from lvws_ros.learning.features import GraphFeatures
 from lvws_ros.learning.gatn import NEG, Batch, collate, segment_softmax
 
-__all__ = ["Demo", "Targets", "batch_tensors", "feasibility_mask", "imitation_loss"]
+__all__ = ["Demo", "Targets", "batch_tensors", "feasibility_mask", "imitation_loss", "wait_targets"]
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,8 @@ class Targets:
     valid: Tensor  # (entries,) 0/1: entries in the loss (all but idle ones for DBGM)
     choice: Tensor  # (rows,) flat entry index of each row's expert choice
     choice_valid: Tensor  # (rows,) bool: the row has an expert choice among its entries in the loss
+    wait: Tensor  # (rows,) 0/1: the expert waits voluntarily with this robot (see wait_targets)
+    wait_valid: Tensor  # (rows,) bool: rows in the wait head's term (see wait_targets)
 
 
 def feasibility_mask(robot_caps: BoolArray, task_caps: BoolArray, robot_payload: FloatArray,
@@ -47,6 +49,22 @@ def feasibility_mask(robot_caps: BoolArray, task_caps: BoolArray, robot_payload:
     payload); the idle column (last) is always feasible."""
     return np.concatenate([helps(robot_caps, task_caps, task_payload), np.ones((len(robot_caps), 1), dtype=bool)],
                           axis=1)
+
+
+def wait_targets(demo: Demo) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """(wait, valid) of each row of one demonstration, for the wait head (ours). The expert
+    waits voluntarily with robot i when it keeps i waiting although a ready task that i
+    covers alone (Eqs. 10-11; pair feature 0) is left unstarted at this step. Rows in the
+    term: those robots, and every robot the expert puts to work; not the ones it leaves
+    waiting for want of a task they could start alone (the matching never starts those)."""
+    e, mask = demo.expert, demo.mask
+    scored = np.where(mask, e, -1.0)
+    chosen = scored.max(axis=1, initial=-1.0) > 0
+    idle = scored.argmax(axis=1) == e.shape[1] - 1
+    unstarted = np.logical_not((e[:, :-1] > 0).any(axis=0))
+    alone = demo.features.pairs[:, :-1, 0] > 0
+    wait = chosen & idle & (mask[:, :-1] & alone & unstarted[None, :]).any(axis=1)
+    return wait, wait | (chosen & ~idle)
 
 
 def batch_tensors(demos: Sequence[Demo], use_idle: bool = True) -> tuple[Batch, Targets]:
@@ -59,6 +77,8 @@ def batch_tensors(demos: Sequence[Demo], use_idle: bool = True) -> tuple[Batch, 
     x *= valid
     choice = np.zeros(batch.rows, np.int64)
     has_choice = np.zeros(batch.rows, bool)
+    waits = np.zeros(batch.rows, np.float32)
+    wait_valid = np.zeros(batch.rows, bool)
     start = row = 0
     for d in demos:
         r, c = d.expert.shape
@@ -67,13 +87,16 @@ def batch_tensors(demos: Sequence[Demo], use_idle: bool = True) -> tuple[Batch, 
         # a row has a choice only where the expert's pick is an entry in the loss (not so
         # for a robot the expert keeps waiting when the idle column is left out: DBGM)
         has_choice[row:row + r] = scored.max(axis=1, initial=-1.0) > 0
+        if use_idle:
+            waits[row:row + r], wait_valid[row:row + r] = wait_targets(d)
         start, row = start + r * c, row + r
     return batch, Targets(torch.from_numpy(e), torch.from_numpy(x), torch.from_numpy(valid), torch.from_numpy(choice),
-                          torch.from_numpy(has_choice))
+                          torch.from_numpy(has_choice), torch.from_numpy(waits), torch.from_numpy(wait_valid))
 
 
 def imitation_loss(r: Tensor, t: Targets, rows: Tensor, lam: float, choice_weight: float = 0.0,
-                   temperature: float = 0.1) -> Tensor:
+                   temperature: float = 0.1, wait_logits: Tensor | None = None, wait_weight: float = 0.0,
+                   wait_pos_weight: float = 1.0) -> Tensor:
     """Eq. 12: ||(R - E) o X||_1 + lambda ||R - E||_1, averaged over the entries in the
     loss so that batches of different sizes weigh alike. ``rows`` is each entry's row.
 
@@ -82,6 +105,10 @@ def imitation_loss(r: Tensor, t: Targets, rows: Tensor, lam: float, choice_weigh
     entropy of softmax(R / temperature) over its feasible entries against that choice. Eq. 12 alone regresses a sparse E
     under L1 norms, whose minimiser is close to 0 everywhere; the choice term keeps the
     ranking that the greedy matching reads.
+
+    With ``wait_logits`` (the wait head, ours) and ``wait_weight`` > 0, the binary cross
+    entropy of each row that could work (a feasible ready task) against the expert keeping
+    it waiting, the waits weighted by ``wait_pos_weight`` (class balance: they are rare).
     """
     diff = (r - t.e).abs() * t.valid
     count = t.valid.sum().clamp(min=1)
@@ -90,4 +117,7 @@ def imitation_loss(r: Tensor, t: Targets, rows: Tensor, lam: float, choice_weigh
         logits = (r / temperature).masked_fill(t.x <= 0, NEG)[:, None]
         p = segment_softmax(logits, rows, len(t.choice))[:, 0]
         loss = loss - choice_weight * torch.log(p[t.choice[t.choice_valid]].clamp(min=1e-12)).mean()
+    if wait_logits is not None and wait_weight > 0 and bool(t.wait_valid.any()):
+        loss = loss + wait_weight * torch.nn.functional.binary_cross_entropy_with_logits(
+            wait_logits[t.wait_valid], t.wait[t.wait_valid], pos_weight=torch.tensor(wait_pos_weight))
     return loss

@@ -5,8 +5,11 @@
   :func:`~lvws_ros.core.matching.greedy_match` (Eqs. 7-11). Robots matched to the idle task
   wait. The idle column gets the checkpoint's ``idle_bias``, calibrated on held-out
   training instances (NO_VOLUNTARY_WAIT: robots wait only when no ready task needs
-  them). Safety net: if every free robot chose to wait while nothing is running (which
-  would stall the schedule), the matching is redone without the idle task.
+  them). With a wait head (ours), free robots whose probability of waiting exceeds the
+  checkpoint's ``wait_threshold`` (calibrated likewise; None: off) wait and the others
+  are matched. Safety net: if every free robot chose to wait while nothing is running
+  (which would stall the schedule), the matching is redone with all of them and without
+  the idle task.
 * ``dbgm``: a GAT-only network (no transformer, no global context), no idle task, and
   subteams only when no single free robot can do a task: one-to-one matching by reward
   first, then subteams for the tasks left that need them.
@@ -17,6 +20,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +30,7 @@ from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
 from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint
 from lvws_ros.learning.features import InstanceFeatures
-from lvws_ros.learning.gatn import GATN, reward_matrix
+from lvws_ros.learning.gatn import GATN, decision_outputs, reward_matrix
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 NO_VOLUNTARY_WAIT = -1e6  # idle bias that leaves waiting only to robots with nothing to do
@@ -42,38 +46,59 @@ class LVWSPolicy:
     name = "lvws"
 
     def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
-                 idle_bias: float | None = None) -> None:
+                 idle_bias: float | None = None, wait_threshold: float | str | None = "checkpoint") -> None:
+        meta: dict[str, Any] = {}
         if model is None:
             model, meta = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["lvws"])
             idle_bias = float(meta.get("idle_bias", 0.0)) if idle_bias is None else idle_bias
         self.model = model.eval()
         self.idle_bias = 0.0 if idle_bias is None else idle_bias
+        if wait_threshold == "checkpoint":
+            wait_threshold = meta.get("wait_threshold")
+        self.wait_threshold = None if wait_threshold is None else float(wait_threshold)
         self._cache: InstanceFeatures | None = None
 
     def reset(self, instance: Instance) -> None:
         if self._cache is None or self._cache.instance is not instance:  # rollouts reset once per simulation
             self._cache = InstanceFeatures(instance)
 
-    def rewards(self, state: State) -> np.ndarray:
-        """R of Eq. 6 for this decision step, (free robots, ready tasks + idle task): one
-        forward pass, the reward MLP only on the entries the matching reads."""
+    def outputs(self, state: State) -> tuple[np.ndarray, np.ndarray | None]:
+        """R of Eq. 6 for this decision step, (free robots, ready tasks + idle task), and
+        the free robots' wait probabilities (None without a wait head): one forward pass,
+        the reward MLP only on the entries the matching reads."""
         self.reset(state.instance)
         assert self._cache is not None
-        r = reward_matrix(self.model, self._cache.encode(state))
-        if not np.isfinite(r).all():
+        r, wait = decision_outputs(self.model, self._cache.encode(state))
+        if not np.isfinite(r).all() or (wait is not None and not np.isfinite(wait).all()):
             raise PolicyError(f"{self.name}: the model gave non-finite rewards at t={state.time:g}")
-        return r
+        return r, wait
+
+    def rewards(self, state: State) -> np.ndarray:
+        """R of :meth:`outputs` alone."""
+        return self.outputs(state)[0]
 
     def match(self, state: State, r: np.ndarray, subset: list[int] | None = None,
-              idle_bias: float | None = None) -> Decision:
+              idle_bias: float | None = None, wait: np.ndarray | None = None,
+              wait_threshold: float | None = None) -> Decision:
         """Eqs. 7-11 on ``r`` (rows: the free robots, columns: the ready tasks, then the
-        idle task), for the free robots in ``subset`` (default: all of them)."""
+        idle task), for the free robots in ``subset`` (default: all of them). With ``wait``
+        (the free robots' wait probabilities) and a threshold (``wait_threshold``, else the
+        policy's), the robots above it wait and the others are matched."""
         inst = state.instance
         ready, free = state.ready_tasks(), state.free_robots()
         robots = free if subset is None else subset
         if not robots or not ready:
             return Decision((), tuple(robots))
         row_of = {i: k for k, i in enumerate(free)}
+        threshold = self.wait_threshold if wait_threshold is None else wait_threshold
+        if wait is not None and threshold is not None:
+            keep = [i for i in robots if wait[row_of[i]] <= threshold]
+            if len(keep) < len(robots):
+                d = self.match(state, r, keep, idle_bias) if keep else Decision((), ())
+                if d.assignments or (state.task_status == TaskStatus.ASSIGNED).any():
+                    return Decision(d.assignments, tuple(sorted(set(robots) - {i for _, t in d.assignments
+                                                                               for i in t})))
+                # waiting now would stall: match them all as without the head
         sub = r[[row_of[i] for i in robots]].copy()
         bias = self.idle_bias if idle_bias is None else idle_bias
         if bias <= NO_VOLUNTARY_WAIT:
@@ -92,7 +117,8 @@ class LVWSPolicy:
         free = state.free_robots()
         if not free or not state.ready_tasks():
             return Decision((), tuple(free))
-        return self.match(state, self.rewards(state))
+        r, wait = self.outputs(state)
+        return self.match(state, r, wait=wait)
 
 
 class DBGMPolicy:
@@ -184,7 +210,8 @@ class LVWSRolloutPolicy:
 
     At each decision step the candidates are LVWS's matching; the matchings with the
     learned idle column at ``wait_biases`` (voluntary waiting as the network proposes
-    it); GRP's matching; with ``hold_back``, LVWS's matching with one of its subteams
+    it); with a wait head, the matchings with its waits at ``wait_thresholds``; GRP's
+    matching; with ``hold_back``, LVWS's matching with one of its subteams
     told to wait; with ``exclude``, LVWS's matching redone without one free robot (who
     waits). Each candidate is scored by the makespan reached when LVWS finishes the
     schedule from there (and GRP, with ``finish_with_grp``: the better of the two), and
@@ -202,14 +229,16 @@ class LVWSRolloutPolicy:
 
     def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
                  wait_biases: tuple[float, ...] = (-0.2, -0.1, 0.0), hold_back: bool = True,
-                 exclude: bool = True, finish_with_grp: bool = True, budget_ms: float | None = None) -> None:
+                 exclude: bool = True, finish_with_grp: bool = True, budget_ms: float | None = None,
+                 wait_thresholds: tuple[float, ...] = (0.8, 0.5)) -> None:
         if model is None:
             model, meta = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["lvws"])
             base_bias = float(meta.get("idle_bias", NO_VOLUNTARY_WAIT))
+            threshold = meta.get("wait_threshold")
         else:
-            base_bias = NO_VOLUNTARY_WAIT
-        self.base = LVWSPolicy(model=model, idle_bias=base_bias)
-        self.wait_biases = wait_biases
+            base_bias, threshold = NO_VOLUNTARY_WAIT, None
+        self.base = LVWSPolicy(model=model, idle_bias=base_bias, wait_threshold=threshold)
+        self.wait_biases, self.wait_thresholds = wait_biases, wait_thresholds
         self.hold_back, self.exclude, self.finish_with_grp = hold_back, exclude, finish_with_grp
         self.grp = GreedyPayloadPolicy()
         self.budget_ms = budget_ms
@@ -224,9 +253,11 @@ class LVWSRolloutPolicy:
         free = state.free_robots()
         if not free or not state.ready_tasks():
             return [Decision((), tuple(free))]
-        r = self.base.rewards(state)
-        first = self.base.match(state, r)
+        r, wait = self.base.outputs(state)
+        first = self.base.match(state, r, wait=wait)
         proposals = [self.base.match(state, r, idle_bias=b) for b in self.wait_biases]
+        if wait is not None:  # the wait head's proposals, from strict to lenient
+            proposals += [self.base.match(state, r, wait=wait, wait_threshold=t) for t in self.wait_thresholds]
         proposals.append(self.grp.decide(state))
         if self.hold_back:
             proposals += [Decision(tuple(a for a in first.assignments if a != held),

@@ -18,7 +18,7 @@ import math
 import statistics
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,7 @@ from lvws_ros.errors import ConfigError, ModelError
 from lvws_ros.learning.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from lvws_ros.learning.demonstrations import DEMOS_FORMAT, Demo, dagger_demos, label_instances, load_demos, save_demos
 from lvws_ros.learning.gatn import GATN, GATNConfig
-from lvws_ros.learning.loss import batch_tensors, imitation_loss
+from lvws_ros.learning.loss import batch_tensors, imitation_loss, wait_targets
 from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, DBGMPolicy, LVWSPolicy
 
 
@@ -47,18 +47,36 @@ class TrainConfig:
     choice_weight: float = 1.0  # per-robot choice term (beyond the paper); 0: Eq. 12 alone
     seed: int = 0
     dbgm: bool = False  # GAT only, no idle column in the loss
+    wait_weight: float = 1.0  # the wait head's term (models with a wait head only)
+    wait_pos_weight: float | None = None  # weight of the expert's waits; None: class balance (non-waits / waits)
     model: GATNConfig = field(default_factory=GATNConfig)
+
+
+def wait_balance(demos: Sequence[Demo]) -> float:
+    """Rows the expert puts to work / rows where it waits voluntarily (:func:`wait_targets`):
+    the class-balancing weight of the waits."""
+    waits = rows = 0
+    for d in demos:
+        wait, valid = wait_targets(d)
+        waits, rows = waits + int(wait.sum()), rows + int(valid.sum())
+    return (rows - waits) / waits if waits else 1.0
+
+
+def _loss(model: GATN, demos: Sequence[Demo], cfg: TrainConfig, pos_weight: float) -> torch.Tensor:
+    batch, targets = batch_tensors(demos, use_idle=not cfg.dbgm)
+    r, wait = model.forward_with_wait(batch)
+    return imitation_loss(r, targets, batch.entry_row, cfg.lam, cfg.choice_weight, wait_logits=wait,
+                          wait_weight=cfg.wait_weight, wait_pos_weight=pos_weight)
 
 
 def evaluate_loss(model: GATN, demos: Sequence[Demo], cfg: TrainConfig) -> float:
     model.eval()
     total, count = 0.0, 0
+    pos_weight = wait_balance(demos) if cfg.wait_pos_weight is None else cfg.wait_pos_weight
     with torch.inference_mode():
         for k in range(0, len(demos), 256):
             chunk = demos[k:k + 256]
-            batch, targets = batch_tensors(chunk, use_idle=not cfg.dbgm)
-            total += imitation_loss(model(batch), targets, batch.entry_row, cfg.lam,
-                                    cfg.choice_weight).item() * len(chunk)
+            total += _loss(model, chunk, cfg, pos_weight).item() * len(chunk)
             count += len(chunk)
     return total / max(count, 1)
 
@@ -104,6 +122,10 @@ def train(
     # Batches of similar team sizes pad less (robots are padded per batch): sort, shuffle the batches.
     order = sorted(range(len(demos)), key=lambda k: (demos[k].features.robots.shape[0], demos[k].expert.shape, k))
     batches = [order[k:k + cfg.batch_size] for k in range(0, len(order), cfg.batch_size)]
+    pos_weight = 1.0
+    if model.wait is not None:
+        pos_weight = wait_balance(demos) if cfg.wait_pos_weight is None else cfg.wait_pos_weight
+        log(f"wait head: expert waits weighted {pos_weight:.3g}")
     history: list[dict[str, float]] = []
     best_score, best_state = math.inf, None
     for epoch in range(start_epoch, cfg.epochs):
@@ -112,9 +134,8 @@ def train(
         losses = []
         for idx in tqdm(rng.permutation(len(batches)), desc=f"epoch {epoch + 1}/{cfg.epochs}",
                         disable=not progress, unit="batch", leave=False):
-            batch, targets = batch_tensors([demos[k] for k in batches[idx]], use_idle=not cfg.dbgm)
             opt.zero_grad()
-            loss = imitation_loss(model(batch), targets, batch.entry_row, cfg.lam, cfg.choice_weight)
+            loss = _loss(model, [demos[k] for k in batches[idx]], cfg, pos_weight)
             loss.backward()
             opt.step()
             losses.append(loss.item())
@@ -140,6 +161,7 @@ def train(
 
 VALIDATION_TIME_LIMIT = 10.0
 IDLE_BIASES = (0.0, -0.05, -0.1, -0.2, NO_VOLUNTARY_WAIT)
+WAIT_THRESHOLDS = (None, 0.95, 0.9, 0.8, 0.7, 0.6, 0.5)  # the wait head's; None: off
 
 
 @dataclass
@@ -208,31 +230,53 @@ def _cached_demos(cache: Path, log: Callable[[str], None]) -> list[Demo] | None:
     return demos
 
 
-def _policy(model: GATN, dbgm: bool, idle_bias: float) -> Policy:
-    return DBGMPolicy(model=model) if dbgm else LVWSPolicy(model=model, idle_bias=idle_bias)
+def _policy(model: GATN, dbgm: bool, idle_bias: float, wait_threshold: float | None = None) -> Policy:
+    return DBGMPolicy(model=model) if dbgm else LVWSPolicy(model=model, idle_bias=idle_bias,
+                                                          wait_threshold=wait_threshold)
 
 
-def _dagger_job(args: tuple[Instance, dict[str, Any], dict[str, Any], bool, float, float, int]) -> list[Demo]:
-    inst, state_dict, model_cfg, dbgm, idle_bias, time_limit, max_states = args
+def _dagger_job(args: tuple[Instance, dict[str, Any], dict[str, Any], bool, float, float | None, float, int]
+                ) -> list[Demo]:
+    inst, state_dict, model_cfg, dbgm, idle_bias, threshold, time_limit, max_states = args
     torch.set_num_threads(1)  # one process per core
     model = GATN(GATNConfig(**model_cfg))
     model.load_state_dict(state_dict)
-    return dagger_demos(inst, _policy(model.eval(), dbgm, idle_bias), time_limit=time_limit, workers=1,
+    return dagger_demos(inst, _policy(model.eval(), dbgm, idle_bias, threshold), time_limit=time_limit, workers=1,
                         max_states=max_states)
 
 
+@dataclass(frozen=True)
+class Calibration:
+    idle_bias: float
+    wait_threshold: float | None  # None: the wait head is off (or absent)
+    score: float  # mean validation suboptimality, %
+
+
+def _validation_score(model: GATN, val: Sequence[Instance], optimal: dict[str, float], dbgm: bool, bias: float,
+                      threshold: float | None) -> float:
+    policy = _policy(model, dbgm, bias, threshold)
+    return statistics.fmean(
+        100 * (simulate(inst, policy).schedule.makespan - optimal[instance_key(inst)]) / optimal[instance_key(inst)]
+        for inst in val)
+
+
 def calibrate(model: GATN, val: Sequence[Instance], optimal: dict[str, float], dbgm: bool,
-              log: Callable[[str], None]) -> tuple[float, float]:
-    """(idle bias, mean validation suboptimality %) with the best bias of IDLE_BIASES."""
-    best = (0.0, math.inf)
+              log: Callable[[str], None]) -> Calibration:
+    """The idle bias of IDLE_BIASES with the best mean validation suboptimality, then
+    (with a wait head) the best of WAIT_THRESHOLDS at that bias."""
+    best = Calibration(0.0, None, math.inf)
     for bias in (IDLE_BIASES if not dbgm else (0.0,)):
-        score = statistics.fmean(
-            100 * (simulate(inst, _policy(model, dbgm, bias)).schedule.makespan - optimal[instance_key(inst)])
-            / optimal[instance_key(inst)]
-            for inst in val)
+        score = _validation_score(model, val, optimal, dbgm, bias, None)
         log(f"  validation: idle bias {bias:g} -> suboptimality {score:.2f} %")
-        if score < best[1]:
-            best = (bias, score)
+        if score < best.score:
+            best = Calibration(bias, None, score)
+    if model.wait is not None and not dbgm:
+        for threshold in WAIT_THRESHOLDS[1:]:
+            score = _validation_score(model, val, optimal, dbgm, best.idle_bias, threshold)
+            log(f"  validation: idle bias {best.idle_bias:g}, wait threshold {threshold:g} -> suboptimality "
+                f"{score:.2f} %")
+            if score < best.score:
+                best = Calibration(best.idle_bias, threshold, score)
     return best
 
 
@@ -253,6 +297,11 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
     start: GATN | None = None
     if init is not None:
         start, init_meta = load_checkpoint(init)
+        if tcfg.model.wait_head and start.wait is None and init_meta.get("kind") != "dbgm":
+            grown = GATN(replace(start.cfg, wait_head=True))  # a fresh wait head on the initial weights
+            grown.load_state_dict(start.state_dict(), strict=False)
+            start = grown
+            log(f"{init}: a wait head added")
         tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
         log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")
     cache = _cache_path(cache_dir, cfg, train_set) if cache_dir else None
@@ -269,15 +318,15 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
     stages: list[dict[str, Any]] = []
     model, history = train(demos, tcfg, model=start, checkpoint=Path(out).with_suffix(".train.pt"), resume=resume,
                            progress=progress, log=log)
-    bias, score = calibrate(model, val_set, optimal, tcfg.dbgm, log)
-    stages.append({"stage": "imitation", "states": len(demos), "history": history, "idle_bias": bias,
-                   "validation_suboptimality": score})
+    best = calibrate(model, val_set, optimal, tcfg.dbgm, log)
+    stages.append({"stage": "imitation", "states": len(demos), "history": history, "idle_bias": best.idle_bias,
+                   "wait_threshold": best.wait_threshold, "validation_suboptimality": best.score})
     rng = np.random.default_rng(tcfg.seed)
     for rnd in range(cfg.dagger_rounds):
         picks = rng.choice(len(train_set), size=min(cfg.dagger_instances, len(train_set)), replace=False)
         state_dict = {k: v.detach().clone() for k, v in model.state_dict().items()}
-        jobs = [(train_set[k], state_dict, model.cfg.to_dict(), tcfg.dbgm, bias, cfg.label_time_limit,
-                 cfg.dagger_states) for k in picks]
+        jobs = [(train_set[k], state_dict, model.cfg.to_dict(), tcfg.dbgm, best.idle_bias, best.wait_threshold,
+                 cfg.label_time_limit, cfg.dagger_states) for k in picks]
         t0 = time.perf_counter()
         new = label_instances([], processes=cfg.processes, ray_address=cfg.ray_address, progress=progress,
                               jobs=jobs, job=_dagger_job)
@@ -287,15 +336,18 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
         round_cfg = TrainConfig(**{**asdict(tcfg), "model": tcfg.model, "epochs": cfg.dagger_epochs,
                                    "lr": tcfg.lr / 2, "seed": tcfg.seed + rnd + 1})
         candidate, history = train(demos, round_cfg, model=copy.deepcopy(model), progress=progress, log=log)
-        cand_bias, cand_score = calibrate(candidate, val_set, optimal, tcfg.dbgm, log)
+        cand = calibrate(candidate, val_set, optimal, tcfg.dbgm, log)
         stages.append({"stage": f"dagger-{rnd + 1}", "states": len(demos), "history": history,
-                       "idle_bias": cand_bias, "validation_suboptimality": cand_score})
-        if cand_score < score:  # keep a round only when it helps on validation
-            model, bias, score = candidate, cand_bias, cand_score
-    meta = {"kind": "dbgm" if tcfg.dbgm else "lvws", "idle_bias": bias, "validation_suboptimality": score,
+                       "idle_bias": cand.idle_bias, "wait_threshold": cand.wait_threshold,
+                       "validation_suboptimality": cand.score})
+        if cand.score < best.score:  # keep a round only when it helps on validation
+            model, best = candidate, cand
+    meta = {"kind": "dbgm" if tcfg.dbgm else "lvws", "idle_bias": best.idle_bias,
+            "wait_threshold": best.wait_threshold, "validation_suboptimality": best.score,
             "datasets": list(cfg.datasets), "families": [list(f) for f in cfg.families], "own_instances": len(own),
             "init": str(init) if init else None, "data_seed": cfg.data_seed, "training_seed": tcfg.seed,
             "pipeline": {k: v for k, v in asdict(cfg).items() if k != "train"}, "stages": stages}
     save_checkpoint(out, model, _with_config(meta, tcfg, model))
-    log(f"model written to {out}: idle bias {bias:g}, validation suboptimality {score:.2f} %")
+    log(f"model written to {out}: idle bias {best.idle_bias:g}, wait threshold {best.wait_threshold}, "
+        f"validation suboptimality {best.score:.2f} %")
     return model, meta

@@ -8,20 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from lvws_ros.core.datasets import random_instance
-from lvws_ros.core.executor import simulate
-from lvws_ros.learning.features import GraphFeatures, encode_state
+from lvws_ros.learning.features import GraphFeatures
 from lvws_ros.learning.gatn import GATN, GATLayer, GATNConfig, SparseGATLayer, collate, reward_matrix
 from lvws_ros.learning.loss import Demo, batch_tensors, imitation_loss
-from lvws_ros.policies.baselines import GreedyPayloadPolicy
-
-
-def features_at(seed: int, n: int, m: int, step: int = 1) -> GraphFeatures:
-    inst = random_instance(np.random.default_rng(seed), n, m, "f")
-    run = simulate(inst, GreedyPayloadPolicy(), record_states=True)
-    state = run.steps[min(step, len(run.steps) - 1)].state
-    assert state is not None
-    return encode_state(state)
+from samples import features_at
 
 
 @pytest.fixture(scope="module")
