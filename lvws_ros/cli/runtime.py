@@ -53,7 +53,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         res = launch(policy=args.policy, seed=args.seed, model_path=args.model or "", rate=args.rate,
                      config=args.config or "", bag_dir=args.bag_dir, out_dir=args.out_dir, name=args.name,
                      params_file=args.params_file, gif=not args.no_gif, timeout=args.timeout,
-                     sync=not args.no_sync)
+                     sync=not args.no_sync, namespace=args.namespace, domain_id=args.domain_id)
     except LaunchError as exc:
         print(f"lvws launch: failed: {exc}", file=sys.stderr)
         return 1
@@ -121,8 +121,9 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--frame-every", type=float, default=2.0, help="sim seconds between frames")
 
     p = add("launch", cmd_launch, "the case study on ROS 2: cell_sim + scheduler + recorder, then a summary")
-    p.add_argument("--policy", choices=POLICY_NAMES, default="lvws")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--policy", choices=POLICY_NAMES, default=None,
+                   help="scheduling policy (default: the --params-file's, else lvws)")
+    p.add_argument("--seed", type=int, default=None, help="policy seed (default: the --params-file's, else 0)")
     p.add_argument("--model", default=None, help="lvws/dbgm checkpoint (default: the shipped one)")
     p.add_argument("--rate", type=float, default=20.0, help="sim time / wall time")
     p.add_argument("--config", default=None, help="assembly-cell YAML (default: config/assembly_cell.yaml)")
@@ -134,6 +135,11 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--no-sync", action="store_true",
                    help="free-running world: it does not pause at decision steps, so decision latency costs sim time")
     p.add_argument("--timeout", type=float, default=600.0, help="wall seconds before giving up")
+    p.add_argument("--namespace", default="",
+                   help="run the cell in this ROS namespace (topics /NAME/lvws/..., its own clock), so several "
+                        "cells share one domain")
+    p.add_argument("--domain-id", type=int, default=None,
+                   help="ROS_DOMAIN_ID of the run (default: a random one, isolating it)")
 
     # main() hands `lvws scheduler ...` to the node; this parser only serves --help
     p = add("scheduler", None, "the scheduler node (same as `ros2 run lvws_ros scheduler`)")

@@ -259,6 +259,12 @@ class OnlineScheduler:
         self._seen_free: frozenset[str] = frozenset()
         self._seen_ready: frozenset[str] = frozenset()
 
+    def set_policies(self, policy: Policy, fallback: Policy | None) -> None:
+        """Switch policies (a runtime parameter change): the next decision resets them on
+        the current instance; pending assignments stay."""
+        self.policy, self.fallback = policy, fallback
+        self._inst, self._key, self._main_refused = None, None, ""
+
     def _in_order(self, kind: str, last: float | None, stamp: float) -> bool:
         """False for an out-of-order snapshot; a big jump back restarts the world."""
         if last is None or stamp >= last:

@@ -23,7 +23,7 @@ from lvws_ros.core.online import GraphSnapshot, OnlineDecision, TeamSnapshot
 from lvws_ros.errors import BagError
 from lvws_ros.ros.convert import decision_from_msg, graph_from_msg, team_from_msg
 from lvws_ros.ros.resources import msg_dir
-from lvws_ros.ros.topics import ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GRAPH_TOPIC, TEAM_TOPIC
+from lvws_ros.ros.topics import ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GRAPH_TOPIC, TEAM_TOPIC, split_topic
 
 __all__ = ["Run", "flush", "open_writer", "qos_from_bag", "qos_to_bag", "read_run", "reindex", "typestore"]
 
@@ -170,6 +170,7 @@ class Run:
     decisions: list[OnlineDecision] = field(default_factory=list)
     diagnostics: list[dict[str, str]] = field(default_factory=list)
     duration_ns: int = 0
+    namespace: str = "/"  # the cell's namespace (its topics' prefix)
 
 
 def _add(run: Run, topic: str, msg: Any) -> None:
@@ -182,11 +183,12 @@ def _add(run: Run, topic: str, msg: Any) -> None:
     else:
         for s in msg.status:
             run.diagnostics.append({"name": s.name, "level": str(s.level), "message": s.message,
-                                    **{kv.key: kv.value for kv in s.values}})
+                                    "hardware_id": s.hardware_id, **{kv.key: kv.value for kv in s.values}})
 
 
 def read_run(path: str | Path) -> Run:
-    """Every team, graph, decision and diagnostics message of a bag (rosbags AnyReader)."""
+    """Every team, graph, decision and diagnostics message of a bag (rosbags AnyReader),
+    whatever the namespace of its cell; a bag that holds several cells is refused."""
     from rosbags.highlevel import AnyReader
 
     p = Path(path)
@@ -196,9 +198,17 @@ def read_run(path: str | Path) -> Run:
     try:
         with AnyReader([p], default_typestore=typestore()) as reader:
             run = Run(p, {c.topic: c.msgcount for c in reader.connections}, duration_ns=reader.duration)
+            names = {c.topic: split_topic(c.topic) for c in reader.connections}
+            cells = sorted({n[0] for n in names.values() if n is not None and n[1] in wanted[:3]})
+            if len(cells) > 1:
+                raise BagError(f"{p}: holds the topics of several cells ({', '.join(cells)}); record one cell per bag")
+            run.namespace = cells[0] if cells else "/"
             for conn, _t_ns, raw in reader.messages():
-                if conn.topic in wanted:
-                    _add(run, conn.topic, reader.deserialize(raw, conn.msgtype))
+                name = names[conn.topic]
+                if name is not None and name[1] in wanted:
+                    _add(run, name[1], reader.deserialize(raw, conn.msgtype))
+    except BagError:
+        raise
     except Exception as exc:  # rosbags raises many kinds on a broken bag
         raise BagError(f"{p}: not a readable rosbag2 bag ({type(exc).__name__}: {exc})") from None
     return run

@@ -39,6 +39,7 @@ DESCRIPTION = (
     "this many nodes subscribe, default 1), wait_for_subscribers (wall s), "
     "max_sim_time (s), summary (JSON path), gif (animated GIF path), frame_every (sim s between GIF frames)."
 )
+PROGRESS_SECONDS = 2.0  # wall seconds between progress lines (lvws launch shows them)
 ROBOT_COLORS = {"panda": (1.0, 0.5, 0.0), "jackal": (0.1, 0.4, 0.9), "husky": (0.1, 0.7, 0.2)}
 
 
@@ -111,10 +112,14 @@ class CellSimNode(Node):
         self.next_frame = 0.0
         self.tick = 0.02
         self.create_timer(self.tick, self.on_tick)
+        self.create_timer(PROGRESS_SECONDS, self.log_progress)
 
     # -- publishing ----------------------------------------------------------------------
     def publish_state(self) -> None:
+        """The clock first, then team and graph stamped with it: a node on sim time never
+        gets a state from its future, and answers it no earlier than its stamp."""
         self.last_stamp = self.sim.time
+        self.publish_clock()
         self.team_pub.publish(convert.team_to_msg(self.sim.team_snapshot(), self.frame))
         self.graph_pub.publish(convert.graph_to_msg(self.sim.graph_snapshot(), self.frame))
 
@@ -139,6 +144,12 @@ class CellSimNode(Node):
         if msg.assignments:
             self.publish_state()
 
+    def log_progress(self) -> None:
+        if self.started and not self.finished:
+            done = sum(s == TaskStatus.DONE for s in self.sim.status.values())
+            self.get_logger().info(f"progress: sim time {self.sim.time:.1f} s, {done}/{len(self.sim.status)} tasks "
+                                   f"done, {self.decisions} decisions")
+
     # -- the loop ------------------------------------------------------------------------
     def decision_due(self) -> bool:
         return (any(r.available for r in self.sim.team_snapshot().robots)
@@ -150,8 +161,7 @@ class CellSimNode(Node):
         if subs < self.expect_subs and time.monotonic() - self.start_wall < self.wait_subs:
             return  # give the scheduler and recorder time to discover us
         self.started = True
-        self.get_logger().info(f"starting: {subs} subscriber(s) on {topics.TEAM_TOPIC}, rate {self.rate:g}x")
-        self.publish_clock()
+        self.get_logger().info(f"starting: {subs} subscriber(s) on {self.team_pub.topic_name}, rate {self.rate:g}x")
         self.publish_state()
         self.publish_markers()
         if self.sync and self.decision_due():

@@ -1,7 +1,12 @@
 """``lvws launch``: simulator + scheduler + recorder as separate processes (launch_ros is
 not on pip, so this is plain Python).
 
-The three run on an isolated DDS domain (a random ROS_DOMAIN_ID, localhost discovery).
+The three run on a DDS domain (a random ROS_DOMAIN_ID unless given, localhost discovery),
+in the namespace ``namespace`` when given (``-r __ns:=/NAME`` and the cell's own clock,
+``-r /clock:=clock``), so several cells can share one domain, each with its own bag.
+Scheduler parameters: explicit arguments (``policy``, ``seed``, ``model_path``) win over
+the parameter file, which wins over the launcher's defaults. While the run goes on, the
+simulator's progress (sim time, tasks done, decisions) is printed every few seconds.
 The recorder starts first and the simulator waits for both other nodes, so the bag
 holds the whole run. When the simulator finishes, the scheduler and recorder get
 SIGINT (then SIGTERM, then SIGKILL if they hang); on Ctrl-C, SIGTERM or a crashed child
@@ -26,6 +31,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from lvws_ros.errors import ConfigError, LaunchError, PolicyError
+from lvws_ros.ros.topics import CLOCK_REMAP
 
 PR_SET_PDEATHSIG = 1
 
@@ -80,14 +86,20 @@ def _tail(path: Path, lines: int = 15) -> str:
         return ""
 
 
-def _commands(bag: Path, *, policy: str, seed: int, model_path: str, rate: float, config: str,
-              params_file: str | None, summary: Path, gif: Path | None, sync: bool) -> dict[str, list[str]]:
+def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: str, rate: float, config: str,
+              params_file: str | None, summary: Path, gif: Path | None, sync: bool,
+              namespace: str = "") -> dict[str, list[str]]:
     """The three children's command lines, recorder first, simulator last."""
+    from lvws_ros.ros.scheduler_node import DEFAULT_POLICY, check_params_file
+
+    in_file = check_params_file(params_file) if params_file else {}
     # the world and the recorder: neither may miss the first decision
-    sched_params = ["-p", f"policy:={policy}", "-p", f"seed:={seed}", "-p", "use_sim_time:=true",
-                    "-p", "expect_subscribers:=2"]
-    if model_path:
-        sched_params += ["-p", f"model_path:={model_path}"]
+    defaults = {"policy": DEFAULT_POLICY, "seed": 0, "use_sim_time": True, "expect_subscribers": 2}
+    explicit = {k: v for k, v in (("policy", policy), ("seed", seed), ("model_path", model_path or None))
+                if v is not None}
+    sched: dict[str, object] = {k: v for k, v in defaults.items() if k not in in_file}
+    sched.update(explicit)
+    sched_params = [a for k, v in sched.items() for a in ("-p", f"{k}:={_param(v)}")]
     if params_file:
         sched_params = ["--params-file", params_file, *sched_params]
     sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary}", "-p", "expect_subscribers:=2",
@@ -96,14 +108,36 @@ def _commands(bag: Path, *, policy: str, seed: int, model_path: str, rate: float
         sim_params += ["-p", f"gif:={gif}"]
     if config:
         sim_params += ["-p", f"config:={config}"]
+    ns = ["-r", f"__ns:={namespace}", *CLOCK_REMAP] if namespace else []
     return {
-        "recorder": [sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag)],
-        "scheduler": [sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", *sched_params],
-        "cell_sim": [sys.executable, "-m", "lvws_ros.ros.cell_sim_node", "--ros-args", *sim_params],
+        "recorder": [sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag), "--ros-args", *ns,
+                     "-p", "use_sim_time:=true"],
+        "scheduler": [sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", *ns, *sched_params],
+        "cell_sim": [sys.executable, "-m", "lvws_ros.ros.cell_sim_node", "--ros-args", *ns, *sim_params],
     }
 
 
-def _check_inputs(policy: str, model_path: str, config: str, params_file: str | None) -> None:
+def _param(value: object) -> str:
+    """A value as ``-p name:=value`` takes it (YAML)."""
+    return ("true" if value else "false") if isinstance(value, bool) else str(value)
+
+
+def check_namespace(namespace: str) -> str:
+    """``namespace`` as a fully qualified ROS namespace ('' stays ''): ConfigError if invalid."""
+    if not namespace:
+        return ""
+    from rclpy.exceptions import InvalidNamespaceException
+    from rclpy.validate_namespace import validate_namespace
+
+    ns = namespace if namespace.startswith("/") else f"/{namespace}"
+    try:
+        validate_namespace(ns)
+    except InvalidNamespaceException as exc:
+        raise ConfigError(f"--namespace {namespace!r}: not a valid ROS namespace ({exc})") from None
+    return ns
+
+
+def _check_inputs(policy: str | None, model_path: str, config: str, params_file: str | None) -> None:
     from lvws_ros.registry import POLICY_NAMES
     from lvws_ros.ros.resources import case_study_config
     from lvws_ros.ros.scheduler_node import check_params_file
@@ -112,7 +146,7 @@ def _check_inputs(policy: str, model_path: str, config: str, params_file: str | 
     load_cell_config(config or case_study_config())
     if params_file:
         check_params_file(params_file)
-    if policy not in POLICY_NAMES:
+    if policy is not None and policy not in POLICY_NAMES:
         raise PolicyError(f"unknown policy {policy!r}; choose one of {', '.join(POLICY_NAMES)}")
     if model_path and not Path(model_path).is_file():
         raise ConfigError(f"{model_path}: no such model file")
@@ -142,10 +176,30 @@ def _start(commands: dict[str, list[str]], env: dict[str, str], out: Path, child
             _wait_for_line(children[-1], "recording to", 60.0, interrupted)
 
 
-def _supervise(children: list[Child], timeout: float, t0: float, interrupted: list[int]) -> None:
-    """Until the simulator (the last child) exits; LaunchError when anything goes wrong."""
+PROGRESS_EVERY = 3.0  # wall seconds between progress lines
+
+
+def _progress(sim: Child) -> str:
+    """The simulator's latest progress line ('' before the first)."""
+    try:
+        lines = [ln for ln in sim.log_path.read_text(errors="replace").splitlines() if "progress:" in ln]
+    except OSError:
+        return ""
+    return lines[-1].split("progress:", 1)[1].strip() if lines else ""
+
+
+def _supervise(children: list[Child], timeout: float, t0: float, interrupted: list[int], log: Any = print) -> None:
+    """Until the simulator (the last child) exits, printing its progress; LaunchError when
+    anything goes wrong."""
     sim = children[-1]
+    shown, next_show = "", time.monotonic() + PROGRESS_EVERY
     while sim.alive():
+        if time.monotonic() >= next_show:
+            next_show += PROGRESS_EVERY
+            now = _progress(sim)
+            if now and now != shown:
+                log(f"  [{time.monotonic() - t0:5.1f} s] {now}")
+                shown = now
         if interrupted:
             raise LaunchError(f"interrupted by signal {signal.Signals(interrupted[0]).name}")
         for c in children[:-1]:
@@ -158,15 +212,19 @@ def _supervise(children: list[Child], timeout: float, t0: float, interrupted: li
         raise LaunchError(f"cell_sim exited with code {sim.proc.returncode}:\n{_tail(sim.log_path)}")
 
 
-def launch(*, policy: str = "lvws", seed: int = 0, model_path: str = "", rate: float = 20.0,
+def launch(*, policy: str | None = None, seed: int | None = None, model_path: str = "", rate: float = 20.0,
            config: str = "", bag_dir: str | Path = "bags", out_dir: str | Path = "out", name: str | None = None,
            params_file: str | None = None, gif: bool = True, timeout: float = 600.0,
-           domain_id: int | None = None, sync: bool = True, log: Any = print) -> LaunchResult:
+           domain_id: int | None = None, sync: bool = True, namespace: str = "", log: Any = print) -> LaunchResult:
     """Run the case study end to end; raises LaunchError (children stopped) on failure.
-    The configuration, the parameter file, the policy and the model are checked before
-    any process starts (ConfigError / PolicyError)."""
+    The configuration, the parameter file, the policy, the model and the namespace are
+    checked before any process starts (ConfigError / PolicyError). ``policy``/``seed``
+    None: the parameter file's, else the scheduler's defaults."""
     _check_inputs(policy, model_path, config, params_file)
-    run = name or time.strftime(f"case-study-{policy}-%Y%m%d-%H%M%S")
+    namespace = check_namespace(namespace)
+    label = policy or (check_params_file_policy(params_file) if params_file else None) or "lvws"
+    cell = f"{namespace.strip('/').replace('/', '-')}-" if namespace else ""
+    run = name or time.strftime(f"case-study-{cell}{label}-%Y%m%d-%H%M%S")
     bag = Path(bag_dir) / run
     out = Path(out_dir) / run
     if bag.exists():
@@ -175,7 +233,8 @@ def launch(*, policy: str = "lvws", seed: int = 0, model_path: str = "", rate: f
     summary_path = out / "summary.json"
     gif_path = out / "run.gif"
     commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
-                         params_file=params_file, summary=summary_path, gif=gif_path if gif else None, sync=sync)
+                         params_file=params_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
+                         namespace=namespace)
     children: list[Child] = []
     interrupted: list[int] = []
 
@@ -185,8 +244,10 @@ def launch(*, policy: str = "lvws", seed: int = 0, model_path: str = "", rate: f
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     t0 = time.monotonic()
     try:
-        _start(commands, _child_env(domain_id), out, children, interrupted)
-        _supervise(children, timeout, t0, interrupted)
+        env = _child_env(domain_id)
+        _start(commands, env, out, children, interrupted)
+        log(f"running {run}{' in ' + namespace if namespace else ''} (domain {env['ROS_DOMAIN_ID']}); logs in {out}")
+        _supervise(children, timeout, t0, interrupted, log)
     except BaseException:
         codes = stop(children)
         log(f"children stopped: {codes}; logs in {out}")
@@ -199,6 +260,14 @@ def launch(*, policy: str = "lvws", seed: int = 0, model_path: str = "", rate: f
     summary.update({"wall_seconds_total": time.monotonic() - t0, "exit_codes": codes})
     summary_path.write_text(json.dumps(summary, indent=1))
     return LaunchResult(bag, out, summary, gif_path if gif_path.is_file() else None, codes)
+
+
+def check_params_file_policy(params_file: str) -> str | None:
+    """The policy a scheduler parameter file sets, if any."""
+    from lvws_ros.ros.scheduler_node import check_params_file
+
+    value = check_params_file(params_file).get("policy")
+    return None if value is None else str(value)
 
 
 def _wait_for_line(child: Child, text: str, timeout: float, interrupted: list[int]) -> None:

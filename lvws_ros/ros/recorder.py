@@ -1,8 +1,11 @@
 """Recorder: ``ros2 run lvws_ros recorder [-o BAG]``, every topic of a run to an MCAP bag.
 
-Records /lvws/team_state, /lvws/task_graph, /lvws/assignments, /lvws/markers, /clock and
-/diagnostics with raw (serialized) subscriptions, so the CDR bytes go to the bag as they
-came; each connection keeps its topic's QoS. Custom types come from lvws_msgs' .msg
+Records lvws/team_state, lvws/task_graph, lvws/assignments, lvws/markers, clock and
+diagnostics of its namespace (``-r __ns:=/cellA``: that cell's only) with raw
+(serialized) subscriptions, so the CDR bytes go to the bag as they came, under their
+fully qualified names; each connection keeps its topic's QoS. Messages are stamped with
+the node's clock: sim time with ``-p use_sim_time:=true`` (``lvws launch`` sets it), else
+wall time. Custom types come from lvws_msgs' .msg
 files. SIGINT or SIGTERM at any moment closes the bag: it stays readable with
 everything received until then. Every FLUSH_SECONDS the messages received so far go
 to disk as a closed MCAP chunk, so even after SIGKILL at most the last second is lost:
@@ -33,7 +36,8 @@ FLUSH_SECONDS = 0.5  # a killed recording loses at most this much (lvws reindex 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="recorder",
-        description="Record /lvws/*, /clock and /diagnostics to a rosbag2 bag with MCAP storage.")
+        description="Record lvws/*, clock and diagnostics (in the node's namespace) to a rosbag2 bag with MCAP "
+                    "storage; stamps in sim time with --ros-args -p use_sim_time:=true.")
     p.add_argument("-o", "--output", default=None, help="bag folder to create (default: bags/run-<time>)")
     return p
 
@@ -54,7 +58,8 @@ class Recorder(Node):
         self.closed = False
         store = typestore()
         for topic, (type_name, qos) in TOPICS.items():
-            conn = self.writer.add_connection(topic, type_name, typestore=store, offered_qos_profiles=[qos_to_bag(qos)])
+            conn = self.writer.add_connection(self.resolve_topic_name(topic), type_name, typestore=store,
+                                              offered_qos_profiles=[qos_to_bag(qos)])
             self.create_subscription(message_class(type_name), topic, self._writer_for(conn), recording_qos(qos),
                                      raw=True)
         # on the steady clock: a paused simulator must not stop the flushing
@@ -63,7 +68,7 @@ class Recorder(Node):
     def _writer_for(self, conn: object) -> Callable[[bytes], None]:
         def write(data: bytes) -> None:
             if not self.closed:
-                self.writer.write(conn, time.time_ns(), data)  # type: ignore[arg-type]
+                self.writer.write(conn, self.get_clock().now().nanoseconds, data)  # type: ignore[arg-type]
                 self.count += 1
         return write
 

@@ -1,17 +1,18 @@
 """Scheduler node: ``ros2 run lvws_ros scheduler`` (also ``lvws scheduler``).
 
-Subscribes to ``/lvws/team_state`` (TeamState) and ``/lvws/task_graph`` (TaskGraph,
-latched) and publishes ``/lvws/assignments`` (AssignmentArray) at each decision step:
-whenever a robot becomes available or a task becomes ready. A thin shell over
+Subscribes to ``lvws/team_state`` (TeamState) and ``lvws/task_graph`` (TaskGraph,
+latched) and publishes ``lvws/assignments`` (AssignmentArray) at each decision step:
+whenever a robot becomes available or a task becomes ready. Names are relative
+(:mod:`lvws_ros.ros.topics`): ``-r __ns:=/cellA`` moves them all. A thin shell over
 :class:`lvws_ros.core.online.OnlineScheduler`: parameters, message conversion
-(:mod:`lvws_ros.ros.convert`), the core, publish. Health goes to ``/diagnostics`` once
-a second and on every error.
+(:mod:`lvws_ros.ros.convert`), the core, publish. Health goes to ``diagnostics`` once a
+second and on every event, with the node's fully qualified name as ``hardware_id``.
 
-Parameters: policy (lvws | lvws_rollout | dbgm | grp | rand | rand_subteam | exact;
-default lvws), fallback_policy (default grp; "" for none: decides a step the main policy
-cannot serve, with a WARN on /diagnostics), model_path ("" = the shipped checkpoint), seed,
-ack_timeout, expect_subscribers (the first decision waits until this many nodes subscribe
-to the assignments, default 0), use_sim_time.
+Parameters (PARAMETERS: type, default, description, range; ``ros2 param describe``
+shows them): policy, fallback_policy, model_path, seed, decision_budget_ms and
+ack_timeout may change at runtime: the on-set callback builds the new policies and
+applies them, or refuses the change with the reason (an unknown policy, a missing model).
+expect_subscribers is read-only. use_sim_time is rclpy's.
 """
 
 from __future__ import annotations
@@ -22,15 +23,19 @@ import sys
 import time
 import traceback
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
+from lvws_ros.core.executor import Policy
 from lvws_ros.core.online import OnlineScheduler
 from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES, make_policy
@@ -38,19 +43,75 @@ from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main
 
 DESCRIPTION = (
-    "LVWS scheduler node: subscribes to /lvws/team_state and /lvws/task_graph, "
-    "publishes /lvws/assignments (lvws_msgs/AssignmentArray) at every decision step. "
-    "ROS parameters: policy, model_path, seed, ack_timeout, use_sim_time "
-    "(--ros-args -p NAME:=VALUE or --params-file config/scheduler.yaml)."
+    "LVWS scheduler node: subscribes to lvws/team_state and lvws/task_graph, publishes lvws/assignments "
+    "(lvws_msgs/AssignmentArray) at every decision step, health on diagnostics; names are relative to the "
+    "node's namespace. ROS parameters: " + ", ".join(
+        ["policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "ack_timeout",
+         "expect_subscribers", "use_sim_time"])
+    + " (--ros-args -p NAME:=VALUE or --params-file config/scheduler.yaml)."
 )
 DEFAULT_POLICY = "lvws"
-# name -> (type, default); the ones a params file may set
-PARAMETERS: dict[str, tuple[type, object]] = {"policy": (str, DEFAULT_POLICY), "fallback_policy": (str, "grp"),
-                                              "model_path": (str, ""),
-                                              "seed": (int, 0), "ack_timeout": (float, 5.0),
-                                              "expect_subscribers": (int, 0), "use_sim_time": (bool, False)}
+
+
+@dataclass(frozen=True)
+class Param:
+    """A parameter of the node: what ``ros2 param describe`` shows, and the params-file check."""
+
+    kind: type
+    default: Any
+    description: str
+    low: float | None = None  # inclusive range (numbers)
+    high: float | None = None
+    read_only: bool = False
+
+    def descriptor(self) -> ParameterDescriptor:
+        kinds = {str: ParameterType.PARAMETER_STRING, int: ParameterType.PARAMETER_INTEGER,
+                 float: ParameterType.PARAMETER_DOUBLE, bool: ParameterType.PARAMETER_BOOL}
+        d = ParameterDescriptor(description=self.description, read_only=self.read_only, type=kinds[self.kind])
+        if self.kind is int and self.low is not None and self.high is not None:
+            d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)]
+        elif self.kind is float and self.low is not None and self.high is not None:
+            d.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high),
+                                                         step=0.0)]
+        return d
+
+
+PARAMETERS: dict[str, Param] = {
+    "policy": Param(str, DEFAULT_POLICY, f"scheduling policy: {' | '.join(POLICY_NAMES)}"),
+    "fallback_policy": Param(str, "grp", "decides a step the main policy cannot serve (WARN on diagnostics); "
+                                         "'' for none"),
+    "model_path": Param(str, "", "checkpoint of a learned policy; '' for the shipped one"),
+    "seed": Param(int, 0, "seed of the random policies", 0, 2**31 - 1),
+    "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (lvws_rollout, "
+                                            "exact) in ms; 0: their own limits", 0.0, 3.6e6),
+    "ack_timeout": Param(float, 5.0, "seconds before an assignment the world did not take is offered again",
+                         0.01, 3600.0),
+    "expect_subscribers": Param(int, 0, "the first decision waits (at most 20 s) until this many nodes subscribe "
+                                        "to lvws/assignments", 0, 1000, read_only=True),
+    "use_sim_time": Param(bool, False, "rclpy's: the node's clock follows /clock"),
+}
+RUNTIME_POLICY_PARAMETERS = ("policy", "fallback_policy", "model_path", "seed", "decision_budget_ms")
 SUBSCRIBER_WAIT = 20.0  # wall seconds the first decision waits for expect_subscribers
 SETTLE_SECONDS = 0.2  # wall time to wait for the matching team/graph message
+
+
+def check_value(name: str, value: Any) -> str:
+    """Why ``value`` is not valid for parameter ``name`` ('' if it is)."""
+    if name not in PARAMETERS:
+        return f"unknown parameter (known: {', '.join(PARAMETERS)})"
+    par = PARAMETERS[name]
+    if not isinstance(value, par.kind) or (par.kind is not bool and isinstance(value, bool)):
+        if not (par.kind is float and isinstance(value, int) and not isinstance(value, bool)):
+            return f"expected {par.kind.__name__}, got {value!r}"
+    if par.low is not None and par.high is not None and not par.low <= value <= par.high:
+        return f"{value!r} is out of range [{par.low:g}, {par.high:g}]"
+    if name in ("policy", "fallback_policy") and value not in POLICY_NAMES and not (name == "fallback_policy"
+                                                                                   and value == ""):
+        return f"unknown {value!r}; one of {', '.join(POLICY_NAMES)}" + (" or ''" if name == "fallback_policy"
+                                                                           else "")
+    if name == "model_path" and value and not Path(value).is_file():
+        return f"no such file {value!r}"
+    return ""
 
 
 def check_params_file(path: str | Path, node: str = "scheduler") -> dict[str, Any]:
@@ -75,39 +136,49 @@ def check_params_file(path: str | Path, node: str = "scheduler") -> dict[str, An
             raise ConfigError(f"{p}: {key}: expected a 'ros__parameters' mapping")
         params.update(section["ros__parameters"])
     for name, value in params.items():
-        if name not in PARAMETERS:
-            raise ConfigError(f"{p}: {node}.{name}: unknown parameter (known: {', '.join(PARAMETERS)})")
-        kind = PARAMETERS[name][0]
-        if not isinstance(value, kind) or (kind is not bool and isinstance(value, bool)):
-            if not (kind is float and isinstance(value, int) and not isinstance(value, bool)):
-                raise ConfigError(f"{p}: {node}.{name}: expected {kind.__name__}, got {value!r}")
-    for key in ("policy", "fallback_policy"):
-        if key in params and params[key] not in POLICY_NAMES and not (key == "fallback_policy" and params[key] == ""):
-            raise ConfigError(f"{p}: {node}.{key}: unknown {params[key]!r}; one of {', '.join(POLICY_NAMES)}")
-    if params.get("model_path") and not Path(params["model_path"]).is_file():
-        raise ConfigError(f"{p}: {node}.model_path: no such file {params['model_path']!r}")
+        why = check_value(name, value)
+        if why:
+            raise ConfigError(f"{p}: {node}.{name}: {why}")
     return params
+
+
+def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
+    """(main policy, fallback) from the node's parameter values (LvwsError if one cannot be made)."""
+    name, budget = values["policy"], float(values["decision_budget_ms"])
+    options: dict[str, Any] = {}
+    if name in LEARNED_POLICIES:
+        options["model_path"] = values["model_path"]
+    if name == "lvws_rollout" and budget > 0:
+        options["budget_ms"] = budget
+    if name == "exact" and budget > 0:
+        options["time_limit"] = budget / 1000
+    fallback = values["fallback_policy"]
+    return (make_policy(name, seed=int(values["seed"]), **options),
+            make_policy(fallback, seed=int(values["seed"])) if fallback else None)
 
 
 class SchedulerNode(Node):
     def __init__(self) -> None:
         super().__init__("scheduler")
-        self.policy_name = str(self.declare_parameter("policy", DEFAULT_POLICY).value)
-        fallback = str(self.declare_parameter("fallback_policy", "grp").value)
-        model_path = str(self.declare_parameter("model_path", "").value)
-        self.seed = int(self.declare_parameter("seed", 0).value)
-        ack_timeout = float(self.declare_parameter("ack_timeout", 5.0).value)
+        for name, par in PARAMETERS.items():
+            if name == "use_sim_time":  # declared by rclpy: only described here
+                self.set_descriptor(name, par.descriptor())
+            else:
+                self.declare_parameter(name, par.default, par.descriptor())
+        values = self.values()
+        for name, value in values.items():  # overrides from the command line or a params file
+            why = check_value(name, value)
+            if why:
+                raise LvwsError(f"parameter {name}: {why}")
+        self.policy_name = str(values["policy"])
+        self.seed = int(values["seed"])
         # the first decision waits (at most SUBSCRIBER_WAIT) until this many nodes (a recorder,
         # the world) subscribe to lvws/assignments, so none of them misses it
-        self.expect_subscribers = int(self.declare_parameter("expect_subscribers", 0).value)
+        self.expect_subscribers = int(values["expect_subscribers"])
         self.started_at = time.monotonic()
-        if self.policy_name not in POLICY_NAMES:
-            raise LvwsError(f"parameter policy: unknown {self.policy_name!r}; one of {', '.join(POLICY_NAMES)}")
-        if fallback and fallback not in POLICY_NAMES:
-            raise LvwsError(f"parameter fallback_policy: unknown {fallback!r}; one of {', '.join(POLICY_NAMES)} or ''")
-        options = {"model_path": model_path} if self.policy_name in LEARNED_POLICIES else {}
-        self.core = OnlineScheduler(make_policy(self.policy_name, seed=self.seed, **options), ack_timeout,
-                                    fallback=make_policy(fallback, seed=self.seed) if fallback else None)
+        policy, fallback = build_policies(values)
+        self.core = OnlineScheduler(policy, float(values["ack_timeout"]), fallback=fallback)
+        self.add_on_set_parameters_callback(self.on_set_parameters)
         self.pub = self.create_publisher(AssignmentArray, topics.ASSIGNMENTS_TOPIC, topics.ASSIGNMENTS_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, topics.DIAGNOSTICS_QOS)
         self.create_subscription(TeamState, topics.TEAM_TOPIC, self.on_team, topics.TEAM_QOS)
@@ -121,11 +192,42 @@ class SchedulerNode(Node):
         self.rejected: dict[str, str] = {}  # message kind -> why its latest one was ignored
         self.last_latency = 0.0
         self.received = 0
-        self.get_logger().info(f"policy {self.policy_name}, seed {self.seed}, model {model_path or 'shipped'}")
+        self.get_logger().info(f"policy {self.policy_name}, seed {self.seed}, model {values['model_path'] or 'shipped'}"
+                               f", fallback {values['fallback_policy'] or 'none'}; topics under "
+                               f"{self.get_namespace()}")
         # The start-up objects (torch, rclpy, the model) live as long as the node: freezing
         # them keeps a full garbage collection from pausing a decision (100 x 500: p99 of the
         # decision latency 48 -> 37 ms, docs/scale.md).
         gc.freeze()
+
+    def values(self, changes: list[Parameter] | None = None) -> dict[str, Any]:
+        """The node's parameter values, with ``changes`` applied."""
+        out = {name: self.get_parameter(name).value for name in PARAMETERS}
+        out.update({p.name: p.value for p in changes or []})
+        return out
+
+    def on_set_parameters(self, changes: list[Parameter]) -> SetParametersResult:
+        """Validate a runtime change and apply it, or refuse it with the reason (ranges and
+        read-only are rclpy's, from the descriptors)."""
+        for p in changes:
+            why = check_value(p.name, p.value) if p.name in PARAMETERS else ""
+            if why:
+                return SetParametersResult(successful=False, reason=f"{p.name}: {why}")
+        names = {p.name for p in changes}
+        values = self.values(changes)
+        if names & set(RUNTIME_POLICY_PARAMETERS):
+            try:
+                policy, fallback = build_policies(values)
+            except Exception as exc:  # a model that does not load, an option the policy refuses
+                return SetParametersResult(successful=False, reason=f"{type(exc).__name__}: {exc}")
+            self.core.set_policies(policy, fallback)
+            self.policy_name, self.seed = str(values["policy"]), int(values["seed"])
+            self.report(DiagnosticStatus.OK,
+                        f"parameters {', '.join(sorted(names))} changed: policy {self.policy_name}, fallback "
+                        f"{values['fallback_policy'] or 'none'}")
+        if "ack_timeout" in names:
+            self.core.ack_timeout = float(values["ack_timeout"])
+        return SetParametersResult(successful=True)
 
     def on_team(self, msg: TeamState) -> None:
         self.guarded(lambda: self.offer("TeamState", lambda: self.core.offer_team(convert.team_from_msg(msg))))
@@ -193,7 +295,9 @@ class SchedulerNode(Node):
         if decision is None:
             return
         self.last_latency = decision.latency
-        self.pub.publish(convert.decision_to_msg(decision, self.get_clock().now().to_msg()))
+        # never stamped before the inputs it answers (a sim clock may lag the state)
+        stamp = max(self.get_clock().now().nanoseconds / 1e9, decision.team_stamp, decision.graph_stamp)
+        self.pub.publish(convert.decision_to_msg(decision, convert.to_time(stamp)))
         made = ", ".join(f"{t}<-{'+'.join(r)}" for t, r in decision.assignments) or "-"
         self.get_logger().info(f"step {decision.step}: {made}; waiting {', '.join(decision.waiting) or '-'} "
                                f"({1000 * decision.latency:.1f} ms)")
@@ -207,14 +311,16 @@ class SchedulerNode(Node):
         """Log and publish one diagnostics status now (besides the periodic one)."""
         if level == DiagnosticStatus.ERROR:  # one call site per severity (rclpy's rule)
             self.get_logger().error(message)
-        else:
+        elif level == DiagnosticStatus.WARN:
             self.get_logger().warning(message)
+        else:
+            self.get_logger().info(message)
         self.publish_diagnostics(level, message)
 
     def publish_diagnostics(self, level: bytes | None = None, message: str = "") -> None:
         """The node's health: ERROR while the latest message of a kind was refused or the
         last step failed, else OK; ``level``/``message`` publish one event now."""
-        status = DiagnosticStatus(name="lvws_scheduler", hardware_id=self.get_name())
+        status = DiagnosticStatus(name="lvws_scheduler", hardware_id=self.get_fully_qualified_name())
         problem = self.error or "; ".join(f"{k} ignored: {v}" for k, v in sorted(self.rejected.items()))
         status.level = level if level is not None else (DiagnosticStatus.ERROR if problem else DiagnosticStatus.OK)
         status.message = message or problem or ("waiting for team and task graph" if self.core.team is None

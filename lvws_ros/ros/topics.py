@@ -1,4 +1,13 @@
-"""Topic names and QoS profiles of a run: every topic once, with its type and QoS."""
+"""Topic names and QoS profiles of a run: every topic once, with its type and QoS.
+
+Every name is relative, so a node's namespace moves all of them: in the root namespace
+``lvws/team_state`` is ``/lvws/team_state``; with ``--ros-args -r __ns:=/cellA`` it is
+``/cellA/lvws/team_state``. Health goes to ``diagnostics`` (``/diagnostics`` in the root
+namespace, as diagnostic_aggregator expects; ``/cellA/diagnostics`` in a cell, with the
+node's fully qualified name as ``hardware_id``). The simulator publishes ``clock``; nodes on
+sim time in a namespace take it with ``-r /clock:=clock`` (``lvws launch --namespace``
+passes it), so two cells on one domain keep two clocks.
+"""
 
 from __future__ import annotations
 
@@ -7,12 +16,13 @@ from typing import Any
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-TEAM_TOPIC = "/lvws/team_state"
-GRAPH_TOPIC = "/lvws/task_graph"
-ASSIGNMENTS_TOPIC = "/lvws/assignments"
-MARKERS_TOPIC = "/lvws/markers"
-DIAGNOSTICS_TOPIC = "/diagnostics"
-CLOCK_TOPIC = "/clock"
+TEAM_TOPIC = "lvws/team_state"
+GRAPH_TOPIC = "lvws/task_graph"
+ASSIGNMENTS_TOPIC = "lvws/assignments"
+MARKERS_TOPIC = "lvws/markers"
+DIAGNOSTICS_TOPIC = "diagnostics"
+CLOCK_TOPIC = "clock"
+CLOCK_REMAP = ("-r", "/clock:=clock")  # a namespaced node on sim time reads its cell's clock
 
 TEAM_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 # latched: late joiners get the current graph
@@ -33,6 +43,18 @@ TOPICS: dict[str, tuple[str, QoSProfile]] = {
     DIAGNOSTICS_TOPIC: ("diagnostic_msgs/msg/DiagnosticArray", DIAGNOSTICS_QOS),
     CLOCK_TOPIC: ("rosgraph_msgs/msg/Clock", CLOCK_QOS),
 }
+
+
+def split_topic(name: str) -> tuple[str, str] | None:
+    """(namespace, relative name of TOPICS) of a fully qualified topic name, e.g.
+    ``/cellA/lvws/team_state`` -> (``/cellA``, ``lvws/team_state``); None for a topic
+    that is not one of a run's."""
+    for rel in TOPICS:
+        if name == f"/{rel}":
+            return "/", rel
+        if name.endswith(f"/{rel}") and name.startswith("/"):
+            return name[: -len(rel) - 1], rel
+    return None
 
 
 def message_class(type_name: str) -> Any:

@@ -1,6 +1,7 @@
 """A scheduler node in its own process and a test node that talks to it over DDS: the
-publishers of team and graph, the assignments and /diagnostics it receives (as
-"<level>:<message>" strings), and a spin that stops when a condition holds."""
+publishers of team and graph, the assignments and diagnostics it receives (as
+"<level>:<message>" strings, and the hardware ids), and a spin that stops when a
+condition holds. With ``namespace`` the scheduler runs in it and the probe talks there."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import rclpy
 from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from lvws_ros.ros.topics import GRAPH_QOS, TEAM_QOS, message_class
+from lvws_ros.ros.topics import ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GRAPH_QOS, GRAPH_TOPIC, TEAM_QOS, TEAM_TOPIC, message_class
 
 
 @dataclass
@@ -28,6 +29,8 @@ class Probe:
     graph_pub: Any
     got: list[AssignmentArray] = field(default_factory=list)
     diags: list[str] = field(default_factory=list)
+    hardware_ids: set[str] = field(default_factory=set)
+    node: Any = None
     output: str = ""  # the node's stdout and stderr, once it has stopped
 
     def spin(self, seconds: float, until: Callable[[], bool] = lambda: False) -> None:
@@ -42,20 +45,27 @@ class Probe:
 
 
 @contextmanager
-def scheduler_probe(ros_context: Any, name: str, ros_args: Sequence[str]) -> Iterator[Probe]:
-    """``python -m lvws_ros.ros.scheduler_node --ros-args *ros_args`` and a test node
-    ``name``; SIGINT to the scheduler on the way out (its output in ``probe.output``)."""
-    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", *ros_args],
+def scheduler_probe(ros_context: Any, name: str, ros_args: Sequence[str], namespace: str = "") -> Iterator[Probe]:
+    """``python -m lvws_ros.ros.scheduler_node --ros-args *ros_args`` (in ``namespace``)
+    and a test node ``name`` there; SIGINT to the scheduler on the way out (its output in
+    ``probe.output``)."""
+    ns = ["-r", f"__ns:={namespace}"] if namespace else []
+    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", *ns, *ros_args],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    node = rclpy.create_node(name, context=ros_context)
+    node = rclpy.create_node(name, context=ros_context, namespace=namespace or None)
     executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
     reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-    probe = Probe(proc, executor, node.create_publisher(TeamState, "/lvws/team_state", TEAM_QOS),
-                  node.create_publisher(TaskGraph, "/lvws/task_graph", GRAPH_QOS))
-    node.create_subscription(AssignmentArray, "/lvws/assignments", probe.got.append, reliable)
-    node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics",
-                             lambda m: probe.diags.extend(f"{s.level[0]}:{s.message}" for s in m.status), reliable)
+    probe = Probe(proc, executor, node.create_publisher(TeamState, TEAM_TOPIC, TEAM_QOS),
+                  node.create_publisher(TaskGraph, GRAPH_TOPIC, GRAPH_QOS), node=node)
+
+    def on_diagnostics(m: Any) -> None:
+        probe.diags.extend(f"{s.level[0]}:{s.message}" for s in m.status)
+        probe.hardware_ids.update(s.hardware_id for s in m.status)
+
+    node.create_subscription(AssignmentArray, ASSIGNMENTS_TOPIC, probe.got.append, reliable)
+    node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS_TOPIC,
+                             on_diagnostics, reliable)
     try:
         yield probe
     finally:

@@ -21,12 +21,12 @@ from lvws_ros.cli.report import report, verify
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import BagError
 from lvws_ros.ros.bag import read_run
-from lvws_ros.ros.topics import GRAPH_QOS, TEAM_QOS, TOPICS, message_class
+from lvws_ros.ros.topics import GRAPH_QOS, TEAM_QOS, TOPICS, message_class, split_topic
 
 pytestmark = pytest.mark.ros  # crosses processes over real DDS
 
 REFERENCE_BAG = REPO / "bags" / "reference" / "case-study-lvws"
-ALL_TOPICS = set(TOPICS)
+ALL_TOPICS = {f"/{t}" for t in TOPICS}  # the root namespace's
 
 
 def read_with_anyreader(bag: Path) -> dict[str, int]:
@@ -105,7 +105,9 @@ def test_the_bag_opens_with_both_readers_and_holds_every_topic(launched):
 
     with AnyReader([launched.bag]) as reader:
         for conn in reader.connections:
-            qos = TOPICS[conn.topic][1]
+            name = split_topic(conn.topic)
+            assert name is not None and name[0] == "/", conn.topic
+            qos = TOPICS[name[1]][1]
             (got,) = conn.ext.offered_qos_profiles
             assert got.depth == qos.depth, conn.topic
             assert (got.reliability == QosReliability.RELIABLE) == (qos.reliability == ReliabilityPolicy.RELIABLE)
@@ -272,7 +274,8 @@ def test_replay_republishes_every_message_of_the_reference_bag(ros_context):
     for topic, (type_name, qos) in TOPICS.items():
         sub_qos = QoSProfile(depth=2000, reliability=qos.reliability, durability=DurabilityPolicy.VOLATILE)
         node.create_subscription(message_class(type_name), topic,
-                                 lambda _m, t=topic: counts.__setitem__(t, counts.get(t, 0) + 1), sub_qos, raw=True)
+                                 lambda _m, t=f"/{topic}": counts.__setitem__(t, counts.get(t, 0) + 1), sub_qos,
+                                 raw=True)
     proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "replay", str(REFERENCE_BAG), "--rate", "5",
                              "--wait-for-subscribers", "3"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)

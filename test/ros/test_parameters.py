@@ -1,0 +1,109 @@
+"""The scheduler's parameters as ROS users expect them, over real DDS: descriptors with
+descriptions and ranges, read-only where a runtime change is not supported, a runtime
+policy switch that works, refusals with a reason; relative names under a namespace and
+a unique diagnostics hardware_id. And the launcher's precedence: explicit arguments,
+then the parameter file, then its own defaults."""
+
+from __future__ import annotations
+
+import pytest
+from lvws_msgs.msg import RobotState, Task, TaskGraph, TeamState
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+
+from lvws_ros.ros.launcher import _commands
+from lvws_ros.ros.scheduler_node import PARAMETERS
+from scheduler_probe import Probe, scheduler_probe
+
+pytestmark = pytest.mark.ros
+
+
+def snapshots(stamp: int) -> tuple[TeamState, TaskGraph]:
+    """Three free robots and three new ready tasks (new ids: the earlier ones are gone)."""
+    team = TeamState(capability_names=["lift", "drive"])
+    team.header.stamp.sec = stamp
+    for k, caps in enumerate(([1, 0], [0, 1], [1, 1])):
+        team.robots.append(RobotState(id=f"r{k}", kind="x", available=True, capabilities=caps, payload=5.0))
+    graph = TaskGraph(capability_names=["lift", "drive"])
+    graph.header.stamp.sec = stamp
+    for k, caps in enumerate(([1, 0], [0, 1], [1, 1])):
+        graph.tasks.append(Task(id=f"s{stamp}t{k}", status=Task.STATUS_READY, capabilities=caps, payload=2.0, duration=5.0))
+    return team, graph
+
+
+def call(probe: Probe, future, seconds: float = 20.0):
+    probe.spin(seconds, future.done)
+    assert future.done(), "no answer from the parameter service"
+    return future.result()
+
+
+def decide(probe: Probe, stamp: int) -> str:
+    """Publish a fresh world at ``stamp`` and return the policy named by the decision."""
+    before = len(probe.got)
+    team, graph = snapshots(stamp)
+    probe.graph_pub.publish(graph)
+    probe.team_pub.publish(team)
+    probe.spin(30, lambda: len(probe.got) > before)
+    assert len(probe.got) > before, probe.diags
+    return probe.got[-1].policy
+
+
+def test_parameters_under_a_namespace_switch_at_runtime_and_refuse_with_a_reason(ros_context):
+    with scheduler_probe(ros_context, "lvws_param_test", ["-p", "policy:=grp"], namespace="/cellA") as probe:
+        probe.wait_for_scheduler()
+        assert probe.team_pub.topic_name == "/cellA/lvws/team_state"
+        client = AsyncParameterClient(probe.node, "/cellA/scheduler")
+        assert client.wait_for_services(timeout_sec=30)
+        described = call(probe, client.describe_parameters(list(PARAMETERS))).descriptors
+        by_name = {d.name: d for d in described}
+        assert all(by_name[n].description for n in PARAMETERS)
+        assert by_name["expect_subscribers"].read_only
+        assert by_name["seed"].integer_range[0].to_value == 2**31 - 1
+        assert by_name["decision_budget_ms"].floating_point_range[0].from_value == 0.0
+
+        assert decide(probe, 1) == "grp"
+        refused = {
+            "policy": Parameter("policy", value="bogus"),
+            "model_path": Parameter("model_path", value="/no/such/model.pt"),
+            "seed": Parameter("seed", value=-1),
+            "expect_subscribers": Parameter("expect_subscribers", value=3),
+            "ack_timeout": Parameter("ack_timeout", value=0.0),
+        }
+        for name, param in refused.items():
+            (result,) = call(probe, client.set_parameters([param])).results
+            assert not result.successful and result.reason, name
+        (result,) = call(probe, client.set_parameters([Parameter("policy", value="bogus")])).results
+        assert "unknown 'bogus'" in result.reason
+        assert decide(probe, 2) == "grp"  # a refused change changes nothing
+
+        results = call(probe, client.set_parameters([Parameter("policy", value="lvws_rollout"),
+                                                      Parameter("decision_budget_ms", value=50.0)])).results
+        assert all(r.successful for r in results), [r.reason for r in results]
+        assert decide(probe, 3) == "lvws_rollout"
+        got = call(probe, client.get_parameters(["policy", "decision_budget_ms"])).values
+        assert (got[0].string_value, got[1].double_value) == ("lvws_rollout", 50.0)
+        probe.spin(2.0, lambda: bool(probe.hardware_ids))
+        assert probe.hardware_ids == {"/cellA/scheduler"}  # unique per cell
+    assert "policy lvws_rollout" in probe.output
+
+
+def test_params_file_wins_over_the_launchers_defaults_and_explicit_arguments_over_both(tmp_path):
+    params = tmp_path / "p.yaml"
+    params.write_text("scheduler:\n  ros__parameters:\n    policy: grp\n    seed: 7\n    use_sim_time: true\n")
+
+    def scheduler(**kw) -> list[str]:
+        args = {"policy": None, "seed": None, "model_path": "", "rate": 10.0, "config": "",
+                "params_file": str(params), "summary": tmp_path / "s.json", "gif": None, "sync": True, **kw}
+        return _commands(tmp_path / "bag", **args)["scheduler"]
+
+    cmd = scheduler()
+    assert "--params-file" in cmd and not any(a.startswith(("policy:=", "seed:=")) for a in cmd)
+    assert "expect_subscribers:=2" in cmd  # a default the file does not set
+    cmd = scheduler(policy="exact", seed=3)
+    assert "policy:=exact" in cmd and "seed:=3" in cmd
+    assert cmd.index("--params-file") < cmd.index("policy:=exact")  # later wins in rcl
+    ns = _commands(tmp_path / "bag", policy=None, seed=None, model_path="", rate=10.0, config="", params_file=None,
+                   summary=tmp_path / "s.json", gif=None, sync=True, namespace="/cellB")
+    for name, cmd in ns.items():
+        assert "__ns:=/cellB" in cmd and "/clock:=clock" in cmd, name
+    assert "use_sim_time:=true" in ns["recorder"]  # the bag is stamped in sim time
