@@ -186,6 +186,7 @@ class CellSimNode(Node):
                     break
             elif self.sim.time >= self.next_pose - 1e-9:
                 self.next_pose = self.sim.time + 1.0
+                self.publish_clock()
                 self.team_pub.publish(convert.team_to_msg(self.sim.team_snapshot(), self.frame))
                 self.publish_markers()
 

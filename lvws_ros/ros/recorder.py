@@ -27,7 +27,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from lvws_ros.ros.bag import flush, open_writer, qos_to_bag, typestore
 from lvws_ros.ros.entry import node_main
-from lvws_ros.ros.topics import TOPICS, message_class
+from lvws_ros.ros.topics import CLOCK_TOPIC, TOPICS, message_class
 
 RECORDER_DEPTH = 10000  # history per subscription: bursts wait here instead of being overwritten
 FLUSH_SECONDS = 0.5  # a killed recording loses at most this much (lvws reindex opens it again)
@@ -57,7 +57,8 @@ class Recorder(Node):
         self.count = 0
         self.closed = False
         store = typestore()
-        for topic, (type_name, qos) in TOPICS.items():
+        # the clock first: a state and its clock arriving together are written clock first
+        for topic, (type_name, qos) in sorted(TOPICS.items(), key=lambda item: item[0] != CLOCK_TOPIC):
             conn = self.writer.add_connection(self.resolve_topic_name(topic), type_name, typestore=store,
                                               offered_qos_profiles=[qos_to_bag(qos)])
             self.create_subscription(message_class(type_name), topic, self._writer_for(conn), recording_qos(qos),

@@ -366,3 +366,24 @@ def test_ctrl_c_on_the_launcher_stops_every_child(tmp_path):
     assert _gone(json.loads(pids_file.read_text()))
     counts = read_with_anyreader(tmp_path / "bags" / "ctrlc")
     assert counts.get("/lvws/team_state", 0) > 0
+
+
+def test_clock_comes_before_the_state_it_stamps_and_decisions_never_precede_their_inputs(launched):
+    from rosbags.highlevel import AnyReader
+
+    from lvws_ros.ros.convert import from_time
+
+    clock, states, decisions = -1.0, 0, 0
+    with AnyReader([launched.bag]) as reader:
+        for conn, t_ns, raw in reader.messages():  # in recorded order
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == "/clock":
+                clock = from_time(msg.clock)
+            elif conn.topic == "/lvws/team_state":
+                assert from_time(msg.header.stamp) <= clock + 1e-9, "a state from the future of /clock"
+                assert abs(t_ns / 1e9 - clock) < 1.0  # the recorder stamps sim time
+                states += 1
+            elif conn.topic == "/lvws/assignments":
+                assert from_time(msg.header.stamp) >= max(from_time(msg.team_stamp), from_time(msg.graph_stamp))
+                decisions += 1
+    assert states and decisions
