@@ -20,6 +20,8 @@ __all__ = [
     "ModelError",
     "PolicyError",
     "ScheduleError",
+    "WorldEventRejected",
+    "WorldStuck",
 ]
 
 
@@ -53,6 +55,14 @@ class ConfigError(LvwsError):
 
 class AssignmentRejected(LvwsError):
     """The simulated world cannot execute an assignment (the message says why)."""
+
+
+class WorldEventRejected(LvwsError):
+    """The simulated world cannot take an event: a task to add, cancel, a robot to fail or repair."""
+
+
+class WorldStuck(LvwsError):
+    """A simulated run that can never finish (the message says which tasks and why)."""
 
 
 class BagError(LvwsError):

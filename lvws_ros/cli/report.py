@@ -10,7 +10,7 @@ really happened.
 from __future__ import annotations
 
 import statistics
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,6 +24,8 @@ from lvws_ros.core.online import (
     TeamSnapshot,
     build_instance,
     build_state,
+    schedulable,
+    snapshot_key,
     still_pending,
 )
 from lvws_ros.core.problem import Instance, Robot, Task
@@ -73,9 +75,11 @@ class RunReport:
         return "\n".join(lines)
 
 
-def executed(team: TeamSnapshot, graph: GraphSnapshot, name: str = "run") -> tuple[Instance, Schedule]:
-    """The executed instance and schedule of the tasks started so far."""
-    robots = tuple(Robot(r.id, tuple(r.capabilities), r.payload) for r in team.robots)
+def executed(teams: Sequence[TeamSnapshot], graph: GraphSnapshot, name: str = "run") -> tuple[Instance, Schedule]:
+    """The executed instance and schedule of the tasks the final graph holds: every robot
+    any of ``teams`` had (a robot that failed for good still did its earlier work)."""
+    latest = {r.id: r for team in teams for r in team.robots}
+    robots = tuple(Robot(r.id, tuple(r.capabilities), r.payload) for r in latest.values())
     tasks, out = [], []
     for t in graph.tasks:
         duration = t.duration
@@ -90,8 +94,8 @@ def executed(team: TeamSnapshot, graph: GraphSnapshot, name: str = "run") -> tup
 def report_run(run: Run) -> RunReport:
     if not run.teams or not run.graphs:
         raise BagError(f"{run.path}: no team state or task graph recorded")
-    team, graph = run.teams[-1], run.graphs[-1]
-    inst, sched = executed(team, graph, run.path.name)
+    graph = run.graphs[-1]
+    inst, sched = executed(run.teams, graph, run.path.name)
     policy = run.decisions[0].policy if run.decisions else "?"
     sched.policy = policy
     sched.decisions = len(run.decisions)
@@ -154,16 +158,18 @@ def decision_inputs(run: Run, ack_timeout: float = 5.0) -> Iterator[tuple[Online
         graphs.setdefault(round(g.stamp, 6), g)
     pending: dict[str, tuple[tuple[str, ...], float]] = {}
     inst: Instance | None = None
+    key: object = None
     for d in sorted(run.decisions, key=lambda d: d.step):
         team, graph = teams.get(round(d.team_stamp, 6)), graphs.get(round(d.graph_stamp, 6))
         if team is None or graph is None:
             raise BagError(f"{run.path}: decision {d.step} names inputs the bag does not hold "
                            f"(team {d.team_stamp}, graph {d.graph_stamp})")
-        if inst is None:
-            inst = build_instance(team, graph)
+        view, _ = schedulable(team, graph)  # what the scheduler could schedule (robots may have failed)
+        if inst is None or snapshot_key(team, view) != key:  # tasks or robots came or went
+            inst, key = build_instance(team, view), snapshot_key(team, view)
         now = max(team.stamp, graph.stamp)
-        pending = still_pending(pending, graph, now, ack_timeout)
-        yield d, team, graph, build_state(inst, team, graph, {k: v[0] for k, v in pending.items()})
+        pending = still_pending(pending, graph, now, ack_timeout, team)
+        yield d, team, graph, build_state(inst, team, view, {k: v[0] for k, v in pending.items()})
         for task, robots in d.assignments:
             pending[task] = (tuple(robots), now)
 

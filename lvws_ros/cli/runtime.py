@@ -1,5 +1,6 @@
-"""``lvws`` commands of the case study and of recorded runs: sim, launch, report,
-verify, replay (``lvws scheduler`` is the node itself, see :mod:`lvws_ros.cli.main`)."""
+"""``lvws`` commands of the case study and of recorded runs: sim, launch, submit, cancel,
+fault, report, verify, replay (``lvws scheduler`` is the node itself, see
+:mod:`lvws_ros.cli.main`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from lvws_ros.errors import LaunchError
+from lvws_ros.errors import LaunchError, WorldStuck
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
 
 
@@ -18,13 +19,20 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from lvws_ros.registry import make_policy
     from lvws_ros.ros.resources import case_study_config
     from lvws_ros.sim.config import load_cell_config
+    from lvws_ros.sim.events import load_events
     from lvws_ros.sim.runner import run_offline
     from lvws_ros.sim.world import CellSim
 
     sim = CellSim(load_cell_config(args.config or case_study_config()))
+    events = load_events(args.events) if args.events else None
     options = {"model_path": args.model} if args.model and args.policy in LEARNED_POLICIES else {}
-    sched, decisions = run_offline(sim, make_policy(args.policy, seed=args.seed, **options),
-                                   frame_every=args.frame_every if args.gif or args.frames else None)
+    try:
+        sched, decisions = run_offline(sim, make_policy(args.policy, seed=args.seed, **options),
+                                       frame_every=args.frame_every if args.gif or args.frames else None,
+                                       events=events)
+    except WorldStuck as exc:
+        print(f"lvws sim: the run ended: {exc}", file=sys.stderr)
+        return 1
     problems = check_schedule(sim.executed_instance(), sched)
     print(f"{args.policy}: makespan {sched.makespan:.2f} s, {len(decisions)} decisions, "
           f"valid: {'yes' if not problems else problems}")
@@ -53,7 +61,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
         res = launch(policy=args.policy, seed=args.seed, model_path=args.model or "", rate=args.rate,
                      config=args.config or "", bag_dir=args.bag_dir, out_dir=args.out_dir, name=args.name,
                      params_file=args.params_file, gif=not args.no_gif, timeout=args.timeout,
-                     sync=not args.no_sync, namespace=args.namespace, domain_id=args.domain_id)
+                     sync=not args.no_sync, namespace=args.namespace, domain_id=args.domain_id,
+                     events=args.events)
     except LaunchError as exc:
         print(f"lvws launch: failed: {exc}", file=sys.stderr)
         return 1
@@ -69,6 +78,19 @@ def cmd_launch(args: argparse.Namespace) -> int:
     print(f"gif:       {res.gif}")
     print(f"logs:      {res.out_dir}")
     return 0
+
+
+def cmd_world(args: argparse.Namespace) -> int:
+    """lvws submit / cancel / fault: one service call to a running cell_sim."""
+    from lvws_ros.ros.world_client import call_world, tasks_from_file
+
+    ok, message = call_world(
+        args.command, namespace=args.namespace, domain_id=args.domain_id,
+        tasks=tasks_from_file(args.tasks) if args.command == "submit" else (),
+        target=getattr(args, "task", "") or getattr(args, "robot", ""), failed=not getattr(args, "repair", False),
+        timeout=args.timeout)
+    print(f"lvws {args.command}: {'done' if ok else 'refused'}: {message}", file=sys.stdout if ok else sys.stderr)
+    return 0 if ok else 1
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -119,6 +141,7 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--gif", help="write an animated GIF of the run here")
     p.add_argument("--frames", help="write a PNG per frame into this folder")
     p.add_argument("--frame-every", type=float, default=2.0, help="sim seconds between frames")
+    p.add_argument("--events", default=None, help="scripted world events (YAML); see lvws_ros/sim/events.py")
 
     p = add("launch", cmd_launch, "the case study on ROS 2: cell_sim + scheduler + recorder, then a summary")
     p.add_argument("--policy", choices=POLICY_NAMES, default=None,
@@ -140,6 +163,25 @@ def add_parsers(add: Adder) -> None:
                         "cells share one domain")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS_DOMAIN_ID of the run (default: a random one, isolating it)")
+
+    p.add_argument("--events", default=None, help="scripted world events (YAML: at t, submit / cancel / fail / "
+                                                   "repair); see lvws_ros/sim/events.py")
+
+    for name, help_text in (
+            ("submit", "add tasks to a running cell (cell_sim's submit_tasks service)"),
+            ("cancel", "cancel a task of a running cell (cell_sim's cancel_task service)"),
+            ("fault", "fail (or --repair) a robot of a running cell (cell_sim's set_robot_fault service)")):
+        p = add(name, cmd_world, help_text)
+        if name == "submit":
+            p.add_argument("tasks", help="YAML list of task entries, like config/assembly_cell.yaml's tasks")
+        elif name == "cancel":
+            p.add_argument("task")
+        else:
+            p.add_argument("robot")
+            p.add_argument("--repair", action="store_true", help="bring a failed robot back")
+        p.add_argument("--namespace", default="", help="the cell's namespace (lvws launch --namespace)")
+        p.add_argument("--domain-id", type=int, default=None, help="the cell's ROS_DOMAIN_ID (lvws launch prints it)")
+        p.add_argument("--timeout", type=float, default=20.0, help="wall seconds to wait for the simulator")
 
     # main() hands `lvws scheduler ...` to the node; this parser only serves --help
     p = add("scheduler", None, "the scheduler node (same as `ros2 run lvws_ros scheduler`)")

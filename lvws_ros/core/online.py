@@ -40,12 +40,14 @@ import graphlib
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, check_decision
 from lvws_ros.core.problem import MAX_VALUE, Instance, Robot, Task
+from lvws_ros.core.subteams import covered
 from lvws_ros.errors import InstanceError
 
 BUSY_EPS = 1e-3  # a busy robot with an overdue estimate is still busy
@@ -182,6 +184,40 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
     return Instance(name, tuple(graph.capability_names), robots, tasks)
 
 
+def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot, dict[str, str]]:
+    """The part of ``graph`` the robots of ``team`` can schedule, and the tasks held back
+    (id -> why). A task the whole present team cannot cover (Eqs. 10-11: robots failed or
+    gone) is held back with every task waiting on it, until the team can cover it again; a
+    DONE task it cannot cover any more is left out and dropped from its dependents'
+    prerequisites (they are satisfied). The rest is scheduled as usual."""
+    k = len(graph.capability_names)
+    vectors = [r.capabilities for r in team.robots] + [t.capabilities for t in graph.tasks]
+    if not graph.tasks or any(len(v) != k for v in vectors):
+        return graph, {}  # nothing to hold back, or malformed: build_instance says what is wrong
+    team_caps = np.array([r.capabilities for r in team.robots], dtype=bool).reshape(-1, k).any(axis=0)
+    team_payload = float(sum(r.payload for r in team.robots))
+    need = np.array([t.capabilities for t in graph.tasks], dtype=bool).reshape(-1, k)
+    ok = covered(team_caps, team_payload, need, np.array([t.payload for t in graph.tasks], dtype=np.float64))
+    if ok.all():
+        return graph, {}
+    done_gone = {t.id for t, c in zip(graph.tasks, ok, strict=True) if not c and t.status == TaskStatus.DONE}
+    held = {t.id: "the robots present cannot cover it" for t, c in zip(graph.tasks, ok, strict=True)
+            if not c and t.status != TaskStatus.DONE}
+    children: dict[str, list[str]] = {}
+    for t in graph.tasks:
+        for p in t.prerequisites:
+            children.setdefault(p, []).append(t.id)
+    stack = list(held)
+    while stack:
+        for c in children.get(stack.pop(), []):
+            if c not in held:
+                held[c] = "waits on a task the robots present cannot cover"
+                stack.append(c)
+    kept = tuple(replace(t, prerequisites=tuple(p for p in t.prerequisites if p not in done_gone))
+                 for t in graph.tasks if t.id not in held and t.id not in done_gone)
+    return replace(graph, tasks=kept), held
+
+
 def unready(graph: GraphSnapshot) -> list[tuple[str, str]]:
     """(task, prerequisite) for each task the graph calls READY although a prerequisite
     is not DONE: such a task is not ready."""
@@ -236,6 +272,13 @@ def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: G
             and (robots is None or set(v[0]) <= robots)}
 
 
+def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:
+    """What the scheduling instance of two snapshots depends on: equal keys, same instance
+    (a new one when tasks or robots come or go, or change)."""
+    return (team.capability_names, tuple((r.id, r.capabilities, r.payload) for r in team.robots),
+            tuple((t.id, t.capabilities, t.payload, t.duration, t.prerequisites) for t in graph.tasks))
+
+
 class OnlineScheduler:
     """Decides when a robot became available or a task became ready; see the module doc."""
 
@@ -253,9 +296,12 @@ class OnlineScheduler:
         self.step = 0
         self.dropped = 0  # out-of-order snapshots
         self.restarts = 0
-        self.notices: list[str] = []  # for the node's diagnostics; it clears them once reported
+        self.notices: list[str] = []  # for the node's diagnostics (WARN); it clears them once reported
+        self.changes: list[str] = []  # the world's announced changes (tasks, robots), for diagnostics (OK)
         self._inst: Instance | None = None
         self._key: object = None
+        self._view: GraphSnapshot | None = None  # the schedulable part of self.graph
+        self._held: list[str] = []  # tasks held back (no present subteam can cover them)
         self._seen_free: frozenset[str] = frozenset()
         self._seen_ready: frozenset[str] = frozenset()
 
@@ -285,6 +331,13 @@ class OnlineScheduler:
         check_team(snap)
         if not self._in_order("TeamState", self.team.stamp if self.team else None, snap.stamp):
             return False
+        if self.team is not None:
+            before, now = {r.id for r in self.team.robots}, {r.id for r in snap.robots}
+            if before - now:
+                self.notices.append(f"robot(s) {', '.join(sorted(before - now))} left the team (failed?): "
+                                    "not scheduled until they come back")
+            if now - before:
+                self.changes.append(f"robot(s) {', '.join(sorted(now - before))} joined the team")
         self.team = snap
         return True
 
@@ -293,6 +346,17 @@ class OnlineScheduler:
         check_graph(snap)
         if not self._in_order("TaskGraph", self.graph.stamp if self.graph else None, snap.stamp):
             return False
+        if self.graph is not None:
+            before = {t.id: t for t in self.graph.tasks}
+            now = {t.id: t for t in snap.tasks}
+            if set(now) - set(before):
+                self.changes.append(f"task(s) {', '.join(sorted(set(now) - set(before)))} added")
+            if set(before) - set(now):
+                self.changes.append(f"task(s) {', '.join(sorted(set(before) - set(now)))} removed (cancelled)")
+            back = sorted(k for k, t in now.items() if t.status == TaskStatus.READY and not t.assigned_robots
+                          and k in before and before[k].status == TaskStatus.ASSIGNED)
+            if back:
+                self.notices.append(f"task(s) {', '.join(back)} interrupted: READY again, replanned")
         self.graph = snap
         for task, pre in unready(snap):
             self.notices.append(f"TaskGraph says {task} is READY but its prerequisite {pre} is not DONE: not ready")
@@ -313,11 +377,19 @@ class OnlineScheduler:
         self.pending = kept
 
     def instance(self) -> Instance:
+        """The instance of the schedulable part of the latest snapshots (:func:`schedulable`)."""
         assert self.team is not None and self.graph is not None
-        key = (self.team.capability_names, tuple((r.id, r.capabilities, r.payload) for r in self.team.robots),
-               tuple((t.id, t.capabilities, t.payload, t.duration, t.prerequisites) for t in self.graph.tasks))
+        view, held = schedulable(self.team, self.graph)
+        if sorted(held) != self._held:
+            self._held = sorted(held)
+            if held:
+                first = [t for t, why in held.items() if why.startswith("the robots")]
+                self.notices.append(f"task(s) {', '.join(first)} cannot be covered by the robots present: held back "
+                                    f"with {len(held) - len(first)} task(s) waiting on them until robots come back")
+        self._view = view
+        key = snapshot_key(self.team, view)
         if key != self._key or self._inst is None:
-            self._inst = build_instance(self.team, self.graph)
+            self._inst = build_instance(self.team, view)
             self._key = key
             self._main_refused = ""
             try:
@@ -337,7 +409,8 @@ class OnlineScheduler:
         inst = self.instance()
         now = max(self.team.stamp, self.graph.stamp)
         self._release(now)
-        state = build_state(inst, self.team, self.graph, {k: v[0] for k, v in self.pending.items()})
+        assert self._view is not None
+        state = build_state(inst, self.team, self._view, {k: v[0] for k, v in self.pending.items()})
         free = frozenset(inst.robots[i].id for i in state.free_robots())
         ready = frozenset(inst.tasks[j].id for j in state.ready_tasks())
         due = bool(free - self._seen_free) or bool(ready - self._seen_ready)

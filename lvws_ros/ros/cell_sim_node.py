@@ -7,6 +7,13 @@ times faster than wall time; with ``sync`` (default) the world pauses at a decis
 step until the scheduler answers it (or ``sync_timeout`` wall seconds pass), so runs do
 not depend on the machine's speed. When every task is done it prints the makespan,
 writes ``summary`` (JSON) and the ``gif``, and exits 0.
+
+The world changes while it runs (the dynamic protocol of the README): scripted events
+(parameter ``events``, :mod:`lvws_ros.sim.events`) and the services ``submit_tasks``
+(lvws_msgs/srv/SubmitTasks), ``cancel_task`` (CancelTask) and ``set_robot_fault``
+(SetRobotFault), relative to the node's namespace (``lvws submit / cancel / fault``).
+When the robots left can never do a task (and no scripted repair or cancel is still to
+come), the run ends at once with that reason (exit 1).
 """
 
 from __future__ import annotations
@@ -20,24 +27,27 @@ from typing import Any
 
 import rclpy
 from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
+from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitTasks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
 from lvws_ros.core.executor import TaskStatus
-from lvws_ros.errors import AssignmentRejected, LvwsError
+from lvws_ros.errors import AssignmentRejected, LvwsError, WorldEventRejected
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main
 from lvws_ros.ros.resources import case_study_config
 from lvws_ros.sim.config import ARM_KINDS, load_cell_config
-from lvws_ros.sim.world import CellSim
+from lvws_ros.sim.events import WorldEvent, apply_event, load_events, stuck_reason
+from lvws_ros.sim.world import CellSim, Event
 
 DESCRIPTION = (
     "pymunk assembly-cell simulator of the paper's case study. ROS parameters: config (YAML, default "
     "the shipped config/assembly_cell.yaml), rate (sim/wall speed-up, default 10), sync (pause at "
     "decision steps until answered, default true), sync_timeout (wall s), expect_subscribers (start once "
     "this many nodes subscribe, default 1), wait_for_subscribers (wall s), "
-    "max_sim_time (s), summary (JSON path), gif (animated GIF path), frame_every (sim s between GIF frames)."
+    "max_sim_time (s), summary (JSON path), gif (animated GIF path), frame_every (sim s between GIF frames), "
+    "events (scripted world events, YAML)."
 )
 PROGRESS_SECONDS = 2.0  # wall seconds between progress lines (lvws launch shows them)
 ROBOT_COLORS = {"panda": (1.0, 0.5, 0.0), "jackal": (0.1, 0.4, 0.9), "husky": (0.1, 0.7, 0.2)}
@@ -67,9 +77,11 @@ def markers(sim: CellSim, frame_id: str) -> MarkerArray:
         x, y = sim.position(r.id)
         busy = sim.robot_task[r.id] is not None
         shape = Marker.CYLINDER if r.kind in ARM_KINDS else Marker.SPHERE
-        add("robots", shape, x, y, (0.7, 0.7, 0.7), (*ROBOT_COLORS[r.kind], 1.0 if busy else 0.5))
+        failed = r.id in sim.failed
+        add("robots", shape, x, y, (0.7, 0.7, 0.7),
+            (0.3, 0.3, 0.3, 1.0) if failed else (*ROBOT_COLORS[r.kind], 1.0 if busy else 0.5))
         add("labels", Marker.TEXT_VIEW_FACING, x, y - 0.8, (0.3, 0.3, 0.3), white,
-            f"{r.id}: {sim.robot_task[r.id] or 'wait'}")
+            f"{r.id}: {'FAILED' if failed else sim.robot_task[r.id] or 'wait'}")
     for o in sim.cfg.objects.values():
         x, y = sim.position(o.id)
         s = 0.4 + 0.08 * o.weight
@@ -90,6 +102,9 @@ class CellSimNode(Node):
         self.summary_path = str(self.declare_parameter("summary", "").value)
         self.gif_path = str(self.declare_parameter("gif", "").value)
         self.frame_every = float(self.declare_parameter("frame_every", 2.0).value)
+        events_path = str(self.declare_parameter("events", "").value)
+        self.later: list[WorldEvent] = load_events(events_path) if events_path else []
+        self.world_events: list[str] = []  # what happened, for the summary
         if self.rate <= 0:
             raise LvwsError(f"parameter rate must be > 0, got {self.rate}")
         self.sim = CellSim(load_cell_config(cfg_path or case_study_config()))
@@ -100,6 +115,9 @@ class CellSimNode(Node):
         self.marker_pub = self.create_publisher(MarkerArray, topics.MARKERS_TOPIC, topics.MARKERS_QOS)
         self.create_subscription(AssignmentArray, topics.ASSIGNMENTS_TOPIC, self.on_assignments,
                                  topics.ASSIGNMENTS_QOS)
+        self.create_service(SubmitTasks, "submit_tasks", self.on_submit)
+        self.create_service(CancelTask, "cancel_task", self.on_cancel)
+        self.create_service(SetRobotFault, "set_robot_fault", self.on_fault)
         self.waiting_since: float | None = None  # wall time we started waiting for a decision
         self.last_stamp = -1.0
         self.started = False
@@ -150,6 +168,59 @@ class CellSimNode(Node):
             self.get_logger().info(f"progress: sim time {self.sim.time:.1f} s, {done}/{len(self.sim.status)} tasks "
                                    f"done, {self.decisions} decisions")
 
+    # -- the world changes ------------------------------------------------------------------
+    def on_submit(self, req: SubmitTasks.Request, res: SubmitTasks.Response) -> SubmitTasks.Response:
+        tasks = [{"id": t.id, "type": t.type, "object": t.object, "cell": t.cell, "to": t.cell,
+                  **({"from": t.source} if t.source else {}), "duration": t.duration, "payload": t.payload,
+                  "after": list(t.after)} for t in req.tasks]
+        return self.answer(WorldEvent(self.sim.time, "submit", tasks=tuple(tasks)), res)
+
+    def on_cancel(self, req: CancelTask.Request, res: CancelTask.Response) -> CancelTask.Response:
+        return self.answer(WorldEvent(self.sim.time, "cancel", target=req.task_id), res)
+
+    def on_fault(self, req: SetRobotFault.Request, res: SetRobotFault.Response) -> SetRobotFault.Response:
+        return self.answer(WorldEvent(self.sim.time, "fail" if req.failed else "repair", target=req.robot_id), res)
+
+    def answer(self, event: WorldEvent, res: Any) -> Any:
+        """A service call: apply the event now, or say why not."""
+        if self.finished:
+            res.success, res.message = False, "the run is over"
+            return res
+        try:
+            events = self.apply(event)
+        except WorldEventRejected as exc:
+            res.success, res.message = False, str(exc)
+            self.get_logger().warning(f"t={self.sim.time:.2f}: {event.kind} refused: {exc}")
+            return res
+        res.success, res.message = True, "; ".join(self.describe(e) for e in events)
+        return res
+
+    def apply(self, event: WorldEvent) -> list[Event]:
+        """Apply a world event, publish the new state (the scheduler replans at once) and
+        end the run if the world can never finish."""
+        events = apply_event(self.sim, event)
+        for e in events:
+            text = f"t={self.sim.time:.2f}: {self.describe(e)}"
+            self.world_events.append(text)
+            self.get_logger().info(text)
+        if self.started:
+            self.publish_state()
+            self.publish_markers()
+            if self.sync and self.decision_due():
+                self.waiting_since = time.monotonic()
+        reason = stuck_reason(self.sim, self.later)
+        if reason:
+            self.finish(reason)
+        return events
+
+    @staticmethod
+    def describe(e: Event) -> str:
+        if e.kind in ("failed", "repaired"):
+            return f"{e.robots[0]} {e.kind}"
+        if e.kind == "interrupted":
+            return f"{e.task} interrupted (subteam {'+'.join(e.robots)} released), READY again"
+        return f"{e.task} {e.kind}"
+
     # -- the loop ------------------------------------------------------------------------
     def decision_due(self) -> bool:
         return (any(r.available for r in self.sim.team_snapshot().robots)
@@ -189,12 +260,22 @@ class CellSimNode(Node):
                 self.publish_clock()
                 self.team_pub.publish(convert.team_to_msg(self.sim.team_snapshot(), self.frame))
                 self.publish_markers()
+            if self.later and self.sim.time >= self.later[0].at - 1e-9:
+                break  # a scripted event is due: on_tick applies it next
 
     def on_tick(self) -> None:
         if self.finished:
             return
         if not self.started:
             self.start()
+            return
+        while self.later and self.later[0].at <= self.sim.time + 1e-9 and not self.finished:
+            event = self.later.pop(0)
+            try:
+                self.apply(event)
+            except WorldEventRejected as exc:
+                self.finish(f"scripted event at t={event.at:g} ({event.kind} {event.target}) refused: {exc}")
+        if self.finished:
             return
         if self.waiting_since is not None:
             if time.monotonic() - self.waiting_since < self.sync_timeout:
@@ -215,6 +296,7 @@ class CellSimNode(Node):
             "makespan": self.sim.makespan, "tasks_done": sum(s == TaskStatus.DONE for s in self.sim.status.values()),
             "tasks": len(self.sim.status), "decisions_received": self.decisions, "rejected": self.rejected,
             "error": error, "sim_time": self.sim.time, "wall_seconds": time.monotonic() - self.start_wall,
+            "world_events": self.world_events, "failed_robots": sorted(self.sim.failed),
         }
         if self.gif_path and self.sim.trace:
             from lvws_ros.sim.render import render_gif

@@ -88,7 +88,7 @@ def _tail(path: Path, lines: int = 15) -> str:
 
 def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: str, rate: float, config: str,
               params_file: str | None, summary: Path, gif: Path | None, sync: bool,
-              namespace: str = "") -> dict[str, list[str]]:
+              namespace: str = "", events: str | None = None) -> dict[str, list[str]]:
     """The three children's command lines, recorder first, simulator last."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY, check_params_file
 
@@ -108,6 +108,8 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
         sim_params += ["-p", f"gif:={gif}"]
     if config:
         sim_params += ["-p", f"config:={config}"]
+    if events:
+        sim_params += ["-p", f"events:={Path(events).resolve()}"]
     ns = ["-r", f"__ns:={namespace}", *CLOCK_REMAP] if namespace else []
     return {
         "recorder": [sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag), "--ros-args", *ns,
@@ -137,13 +139,18 @@ def check_namespace(namespace: str) -> str:
     return ns
 
 
-def _check_inputs(policy: str | None, model_path: str, config: str, params_file: str | None) -> None:
+def _check_inputs(policy: str | None, model_path: str, config: str, params_file: str | None,
+                  events: str | None = None) -> None:
     from lvws_ros.registry import POLICY_NAMES
     from lvws_ros.ros.resources import case_study_config
     from lvws_ros.ros.scheduler_node import check_params_file
     from lvws_ros.sim.config import load_cell_config
 
     load_cell_config(config or case_study_config())
+    if events:
+        from lvws_ros.sim.events import load_events
+
+        load_events(events)
     if params_file:
         check_params_file(params_file)
     if policy is not None and policy not in POLICY_NAMES:
@@ -215,12 +222,13 @@ def _supervise(children: list[Child], timeout: float, t0: float, interrupted: li
 def launch(*, policy: str | None = None, seed: int | None = None, model_path: str = "", rate: float = 20.0,
            config: str = "", bag_dir: str | Path = "bags", out_dir: str | Path = "out", name: str | None = None,
            params_file: str | None = None, gif: bool = True, timeout: float = 600.0,
-           domain_id: int | None = None, sync: bool = True, namespace: str = "", log: Any = print) -> LaunchResult:
+           domain_id: int | None = None, sync: bool = True, namespace: str = "", events: str | None = None,
+           log: Any = print) -> LaunchResult:
     """Run the case study end to end; raises LaunchError (children stopped) on failure.
     The configuration, the parameter file, the policy, the model and the namespace are
     checked before any process starts (ConfigError / PolicyError). ``policy``/``seed``
     None: the parameter file's, else the scheduler's defaults."""
-    _check_inputs(policy, model_path, config, params_file)
+    _check_inputs(policy, model_path, config, params_file, events)
     namespace = check_namespace(namespace)
     label = policy or (check_params_file_policy(params_file) if params_file else None) or "lvws"
     cell = f"{namespace.strip('/').replace('/', '-')}-" if namespace else ""
@@ -234,7 +242,7 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     gif_path = out / "run.gif"
     commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
                          params_file=params_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
-                         namespace=namespace)
+                         namespace=namespace, events=events)
     children: list[Child] = []
     interrupted: list[int] = []
 

@@ -303,7 +303,11 @@ class SchedulerNode(Node):
                                f"({1000 * decision.latency:.1f} ms)")
 
     def flush_notices(self) -> None:
-        """The core's notices (world restarts, released assignments, untrusted readiness) as WARN."""
+        """The world's changes (tasks added or cancelled, robots back) as OK, the core's
+        notices (robots gone, tasks interrupted, world restarts, released assignments,
+        untrusted readiness) as WARN."""
+        while self.core.changes:
+            self.report(DiagnosticStatus.OK, self.core.changes.pop(0))
         while self.core.notices:
             self.report(DiagnosticStatus.WARN, self.core.notices.pop(0))
 

@@ -17,7 +17,7 @@ import yaml
 from lvws_ros.errors import ConfigError
 
 __all__ = ["ARM_KINDS", "MOBILE_KINDS", "CellConfig", "CellSpec", "ObjectSpec", "RobotSpec", "TaskSpec",
-           "load_cell_config"]
+           "load_cell_config", "parse_task"]
 
 ARM_KINDS = ("panda",)
 MOBILE_KINDS = ("jackal", "husky")
@@ -124,7 +124,8 @@ def _robot(r: dict[str, Any], cells: Mapping[str, CellSpec]) -> RobotSpec:
                      speed=_num(r["speed"], f"robot {r['id']} speed"))
 
 
-def _task(t: dict[str, Any], cells: Mapping[str, CellSpec], objects: Mapping[str, ObjectSpec]) -> TaskSpec:
+def parse_task(t: dict[str, Any], cells: Mapping[str, CellSpec], objects: Mapping[str, ObjectSpec]) -> TaskSpec:
+    """One entry of the task list (KeyError for a missing key, ConfigError naming the task)."""
     tid = str(t["id"])
     if t.get("object") not in objects:
         raise ConfigError(f"task {tid}: unknown object {t.get('object')!r}")
@@ -153,7 +154,7 @@ def _parse_config(d: dict[str, Any]) -> CellConfig:
         if o["cell"] not in cells:
             raise ConfigError(f"object {o['id']}: unknown cell {o['cell']!r}")
         objects[str(o["id"])] = ObjectSpec(str(o["id"]), _num(o["weight"], f"object {o['id']} weight"), str(o["cell"]))
-    tasks = tuple(_task(t, cells, objects) for t in d["tasks"])
+    tasks = tuple(parse_task(t, cells, objects) for t in d["tasks"])
     caps = tuple(str(c) for c in d["capabilities"])
     for needed in ("manipulation", "mobility", *(f"@{c}" for c in cells)):
         if needed not in caps:

@@ -5,24 +5,33 @@ from __future__ import annotations
 from lvws_ros.core.executor import Policy
 from lvws_ros.core.online import OnlineDecision, OnlineScheduler
 from lvws_ros.core.schedule import Schedule
-from lvws_ros.errors import PolicyError
+from lvws_ros.errors import PolicyError, WorldStuck
+from lvws_ros.sim.events import WorldEvent, apply_event, stuck_reason
 from lvws_ros.sim.world import CellSim
 
 __all__ = ["run_offline"]
 
 
 def run_offline(sim: CellSim, policy: Policy, *, max_time: float = 3600.0,
-                frame_every: float | None = None) -> tuple[Schedule, list[OnlineDecision]]:
+                frame_every: float | None = None,
+                events: list[WorldEvent] | None = None) -> tuple[Schedule, list[OnlineDecision]]:
     """Run the case study with ``policy`` in-process (no ROS), through the same
-    :class:`~lvws_ros.core.online.OnlineScheduler` the scheduler node uses."""
+    :class:`~lvws_ros.core.online.OnlineScheduler` the scheduler node uses; ``events``
+    (time order) change the world on the way. WorldStuck when the world can never finish."""
     online = OnlineScheduler(policy)
     decisions: list[OnlineDecision] = []
+    later = list(events or [])
     next_frame = 0.0
     changed = True
     while not sim.done:
         if sim.time > max_time:
             raise PolicyError(f"case study not finished after {max_time:g} s of sim time "
                                f"(status {sim.status})")
+        while later and later[0].at <= sim.time + 1e-9:
+            apply_event(sim, later.pop(0))
+            changed = True
+        if changed and (reason := stuck_reason(sim, later)):
+            raise WorldStuck(f"t={sim.time:.2f}: {reason}")
         if changed:
             online.offer_team(sim.team_snapshot())
             online.offer_graph(sim.graph_snapshot())

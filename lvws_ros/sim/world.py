@@ -10,6 +10,12 @@ offline runner and the tests drive it.
   it (handling time), carries it at the slowest member's speed, and unloads it. The
   members' payloads must add up to the object's weight (Eq. 11), so only a Jackal +
   Husky subteam can carry Obj1 (7 units).
+* The world changes while it runs (the dynamic protocol of the README): :meth:`CellSim.submit`
+  adds tasks, :meth:`CellSim.cancel` removes one (its dependents stop waiting for it),
+  :meth:`CellSim.fail` stops a robot where it is and takes it out of the team (its task
+  returns READY; a carried object is put down where it is, and a transport picks it up
+  from there), :meth:`CellSim.repair` brings it back. :meth:`CellSim.impossible` names the
+  tasks the team left can never do. Refusals are :class:`~lvws_ros.errors.WorldEventRejected`.
 * The scheduling instance (:attr:`CellSim.inst`) carries nominal durations; the
   executed schedule (:meth:`CellSim.schedule`) carries what really happened, approach
   drives and real speeds included, and is valid by the rules of formats.md for the
@@ -20,7 +26,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import pymunk
 
@@ -29,12 +36,13 @@ from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapsho
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import shortfall
-from lvws_ros.errors import AssignmentRejected
-from lvws_ros.sim.config import ARM_KINDS, MOBILE_KINDS, CellConfig, RobotSpec, TaskSpec
+from lvws_ros.errors import AssignmentRejected, ConfigError, WorldEventRejected
+from lvws_ros.sim.config import ARM_KINDS, MOBILE_KINDS, CellConfig, RobotSpec, TaskSpec, parse_task
 
 __all__ = ["CellSim", "Event", "Frame", "build_instance"]
 
 QUEUED, READY, ASSIGNED, DONE = TaskStatus.QUEUED, TaskStatus.READY, TaskStatus.ASSIGNED, TaskStatus.DONE
+FLOOR = ""  # object_cell of an object put down between cells (a failed transport)
 
 
 def _dist(a: Sequence[float], b: Sequence[float]) -> float:
@@ -89,7 +97,7 @@ class Frame:
 @dataclass
 class Event:
     time: float
-    kind: str  # finished
+    kind: str  # finished | submitted | cancelled | interrupted | failed | repaired
     task: str
     robots: tuple[str, ...]
 
@@ -128,6 +136,7 @@ class CellSim:
         self.end: dict[str, float] = {}
         self.team: dict[str, tuple[str, ...]] = {}
         self.robot_task: dict[str, str | None] = {r.id: None for r in self.cfg.robots}
+        self.failed: set[str] = set()
         self.jobs: dict[str, _Job] = {}
         self.trace: list[Frame] = []
         self._task_spec = {t.id: t for t in self.cfg.tasks}
@@ -142,10 +151,10 @@ class CellSim:
         p = self.bodies[body_id].position
         return (float(p.x), float(p.y))
 
-    def _slot(self, cell: str, k: int, n: int) -> tuple[float, float]:
-        """Where member k of n stands around an object at ``cell`` (fixed offsets, so a
-        team carrying together keeps its formation)."""
-        x, y = self.cfg.cells[cell].position
+    def _slot(self, cell: str | tuple[float, float], k: int, n: int) -> tuple[float, float]:
+        """Where member k of n stands around an object at ``cell`` (or at a point: an object
+        on the floor) (fixed offsets, so a team carrying together keeps its formation)."""
+        x, y = self.cfg.cells[cell].position if isinstance(cell, str) else cell
         ang = math.pi / 2 + 2 * math.pi * k / max(n, 1)
         return (x + 0.8 * math.cos(ang), y + 0.8 * math.sin(ang))
 
@@ -175,6 +184,8 @@ class CellSim:
         for rid in robot_ids:
             if rid not in self.robot_task:
                 raise AssignmentRejected(f"task {task_id}: unknown robot {rid!r}")
+            if rid in self.failed:
+                raise AssignmentRejected(f"task {task_id}: robot {rid} has failed")
             if self.robot_task[rid] is not None:
                 raise AssignmentRejected(f"task {task_id}: robot {rid} is busy with {self.robot_task[rid]}")
         spec = self._task_spec[task_id]
@@ -183,7 +194,7 @@ class CellSim:
         if spec.type == "transport":
             if any(k not in MOBILE_KINDS for k in kinds):
                 raise AssignmentRejected(f"task {task_id}: only mobile robots can transport, got {kinds}")
-            if self.object_cell[obj.id] != spec.source:
+            if self.object_cell[obj.id] not in (spec.source, FLOOR):
                 raise AssignmentRejected(f"task {task_id}: {obj.id} is not at {spec.source}")
             total = sum(self.robot_spec[r].payload for r in robot_ids)
             if shortfall(True, total, True, obj.weight)[1] > 0:  # Eq. 11, with the one tolerance
@@ -214,11 +225,116 @@ class CellSim:
             self.robot_task[rid] = task_id
         if spec.type == "transport":
             assert spec.source is not None
+            pickup: str | tuple[float, float] = spec.source
+            if self.object_cell[spec.object] == FLOOR:  # put down by an interrupted transport
+                pickup = self.position(spec.object)
             job = _Job(spec, team, "approach",
-                       targets={r: self._slot(spec.source, k, len(team)) for k, r in enumerate(team)})
+                       targets={r: self._slot(pickup, k, len(team)) for k, r in enumerate(team)})
         else:
             job = _Job(spec, team, "work", timer=spec.duration)
         self.jobs[task_id] = job
+
+    # -- a changing world ------------------------------------------------------------------
+    def _rebuild(self, tasks: Sequence[TaskSpec], objects: dict[str, Any] | None = None) -> None:
+        self.cfg = replace(self.cfg, tasks=tuple(tasks), objects=objects if objects is not None else self.cfg.objects)
+        self.inst = build_instance(self.cfg)
+        self._task_spec = {t.id: t for t in self.cfg.tasks}
+
+    def _interrupt(self, task_id: str) -> tuple[str, ...]:
+        """Stop a running task: its subteam is released, a carried object is put down
+        where it is, the task is READY again with no subteam. Returns the subteam."""
+        job = self.jobs.pop(task_id)
+        if job.task.type == "transport" and job.phase != "approach":
+            self.object_cell[job.task.object] = FLOOR
+            self.bodies[job.task.object].velocity = (0.0, 0.0)
+        for rid in job.team:
+            self.robot_task[rid] = None
+        self.status[task_id] = READY
+        self.start.pop(task_id, None)
+        self.team.pop(task_id, None)
+        return job.team
+
+    def submit(self, items: Sequence[dict[str, Any]]) -> list[Event]:
+        """Add tasks (entries of the config's task list); all or nothing."""
+        known = set(self.status)
+        new: list[TaskSpec] = []
+        for k, item in enumerate(items):
+            try:
+                spec = parse_task(item, self.cfg.cells, self.cfg.objects)
+            except KeyError as exc:
+                raise WorldEventRejected(f"task {k}: missing key {exc}") from None
+            except ConfigError as exc:
+                raise WorldEventRejected(str(exc)) from None
+            if spec.id in known:
+                raise WorldEventRejected(f"task {spec.id}: the id is taken")
+            unknown = [a for a in spec.after if a not in known]
+            if unknown:
+                raise WorldEventRejected(f"task {spec.id}: unknown prerequisite(s) {unknown}")
+            known.add(spec.id)
+            new.append(spec)
+        if not new:
+            raise WorldEventRejected("no task to add")
+        self._rebuild([*self.cfg.tasks, *new])
+        for spec in new:
+            self.status[spec.id] = QUEUED
+        self._refresh_ready()
+        return [Event(self.time, "submitted", spec.id, ()) for spec in new]
+
+    def cancel(self, task_id: str) -> list[Event]:
+        """Remove a task that is not done; its dependents no longer wait for it."""
+        if task_id not in self.status:
+            raise WorldEventRejected(f"unknown task {task_id!r}")
+        if self.status[task_id] == DONE:
+            raise WorldEventRejected(f"task {task_id} is done; only tasks not done can be cancelled")
+        events = []
+        if task_id in self.jobs:
+            events.append(Event(self.time, "interrupted", task_id, self._interrupt(task_id)))
+        del self.status[task_id]
+        self._rebuild([replace(t, after=tuple(a for a in t.after if a != task_id))
+                       for t in self.cfg.tasks if t.id != task_id])
+        self._refresh_ready()
+        return [*events, Event(self.time, "cancelled", task_id, ())]
+
+    def fail(self, robot_id: str) -> list[Event]:
+        """The robot stops where it is and leaves the team; its task returns READY."""
+        if robot_id not in self.robot_task:
+            raise WorldEventRejected(f"unknown robot {robot_id!r}")
+        if robot_id in self.failed:
+            raise WorldEventRejected(f"robot {robot_id} has failed already")
+        events = []
+        task = self.robot_task[robot_id]
+        if task is not None:
+            events.append(Event(self.time, "interrupted", task, self._interrupt(task)))
+        self.failed.add(robot_id)
+        return [*events, Event(self.time, "failed", "", (robot_id,))]
+
+    def repair(self, robot_id: str) -> list[Event]:
+        """A failed robot comes back, available where it stopped."""
+        if robot_id not in self.robot_task:
+            raise WorldEventRejected(f"unknown robot {robot_id!r}")
+        if robot_id not in self.failed:
+            raise WorldEventRejected(f"robot {robot_id} has not failed")
+        self.failed.discard(robot_id)
+        return [Event(self.time, "repaired", "", (robot_id,))]
+
+    def impossible(self) -> dict[str, str]:
+        """Tasks not done that the robots left (all but the failed ones) can never do, by
+        this world's rules (a transport needs mobile robots carrying the object's weight
+        together, Eq. 11; an assembly one arm at its cell handling the part), each with why."""
+        alive = [r for r in self.cfg.robots if r.id not in self.failed]
+        mobile = sum(r.payload for r in alive if r.kind in MOBILE_KINDS)
+        out = {}
+        for t in self.cfg.tasks:
+            if self.status[t.id] == DONE:
+                continue
+            if t.type == "transport":
+                weight = self.cfg.objects[t.object].weight
+                if shortfall(True, mobile, True, weight)[1] > 0:
+                    out[t.id] = f"{t.object} weighs {weight:g}; the mobile robots left carry {mobile:g} together"
+            elif not any(r.kind in ARM_KINDS and r.cell == t.cell and shortfall(True, r.payload, True, t.payload)[1] == 0
+                         for r in alive):
+                out[t.id] = f"no arm left at {t.cell} handling {t.payload:g}"
+        return out
 
     # -- dynamics ---------------------------------------------------------------------
     def _drive(self, rid: str, target: tuple[float, float], speed: float, dt: float) -> bool:
@@ -292,6 +408,8 @@ class CellSim:
     def team_snapshot(self) -> TeamSnapshot:
         robots = []
         for r, caps in zip(self.cfg.robots, (rb.capabilities for rb in self.inst.robots), strict=True):
+            if r.id in self.failed:  # a failed robot leaves the team until repaired
+                continue
             task = self.robot_task[r.id]
             busy = 0.0
             if task is not None:

@@ -1,0 +1,91 @@
+"""``lvws submit / cancel / fault``: change a running cell through ``cell_sim``'s services
+(``submit_tasks``, ``cancel_task``, ``set_robot_fault`` in the cell's namespace).
+
+Run on the cell's DDS domain (``--domain-id``, or ``ROS_DOMAIN_ID``; ``lvws launch``
+prints its domain). Returns the world's answer: (accepted, message).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from lvws_ros.errors import ConfigError, LvwsError
+
+__all__ = ["SERVICES", "call_world", "tasks_from_file"]
+
+SERVICES = {"submit": "submit_tasks", "cancel": "cancel_task", "fault": "set_robot_fault"}
+
+
+def tasks_from_file(path: str | Path) -> list[dict[str, Any]]:
+    """Task entries (like config/assembly_cell.yaml's ``tasks``) from a YAML file: a list,
+    or a mapping with a ``tasks`` list."""
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the task file: {exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: malformed YAML: {exc}") from None
+    items = data.get("tasks") if isinstance(data, dict) else data
+    if not isinstance(items, list) or not items or not all(isinstance(t, dict) for t in items):
+        raise ConfigError(f"{p}: expected a non-empty list of task entries (or a mapping with a 'tasks' list)")
+    return items
+
+
+def _cell_task(k: int, item: dict[str, Any]) -> Any:
+    from lvws_msgs.msg import CellTask
+
+    try:
+        return CellTask(id=str(item["id"]), type=str(item["type"]), object=str(item.get("object", "")),
+                        source=str(item.get("from", "")), cell=str(item.get("to", item.get("cell", ""))),
+                        duration=float(item.get("duration", 0.0)), payload=float(item.get("payload", 0.0)),
+                        after=[str(a) for a in item.get("after", [])])
+    except KeyError as exc:
+        raise ConfigError(f"task {k}: missing key {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"task {k}: {exc}") from None
+
+
+def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]] = (), target: str = "",
+               failed: bool = True, domain_id: int | None = None, timeout: float = 20.0) -> tuple[bool, str]:
+    """Call one of the simulator's services and return (accepted, message); LvwsError when
+    no simulator answers within ``timeout`` wall seconds."""
+    if domain_id is not None:
+        os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # what lvws launch uses
+    import rclpy
+    from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitTasks
+
+    if kind == "submit":
+        srv: Any = SubmitTasks
+        request = SubmitTasks.Request(tasks=[_cell_task(k, t) for k, t in enumerate(tasks)])
+    elif kind == "cancel":
+        srv, request = CancelTask, CancelTask.Request(task_id=target)
+    elif kind == "fault":
+        srv, request = SetRobotFault, SetRobotFault.Request(robot_id=target, failed=failed)
+    else:
+        raise LvwsError(f"unknown world change {kind!r}; one of {', '.join(SERVICES)}")
+    rclpy.init(args=["lvws_world_client"])
+    try:
+        node = rclpy.create_node("lvws_world_client", namespace=namespace or None)
+        client = node.create_client(srv, SERVICES[kind])
+        name = client.srv_name
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise LvwsError(f"no simulator answers on {name} within {timeout:g} s "
+                            f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}; is the cell running there?)")
+        future = client.call_async(request)
+        end = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < end:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        if not future.done():
+            raise LvwsError(f"{name}: no answer within {timeout:g} s")
+        res = future.result()
+        return bool(res.success), str(res.message)
+    finally:
+        rclpy.try_shutdown()
