@@ -92,6 +92,9 @@ class Frame:
     positions: dict[str, tuple[float, float]]
     robot_task: dict[str, str | None]
     done: int
+    total: int = 0  # tasks in the world at that instant (0: unknown)
+    failed: frozenset[str] = frozenset()
+    task_object: dict[str, str] = field(default_factory=dict)  # running task -> the object it works on
 
 
 @dataclass
@@ -402,7 +405,8 @@ class CellSim:
     def record_frame(self) -> None:
         """Keep the current positions for rendering (see lvws_ros.sim.render)."""
         self.trace.append(Frame(self.time, {k: self.position(k) for k in self.bodies}, dict(self.robot_task),
-                                sum(s == DONE for s in self.status.values())))
+                                sum(s == DONE for s in self.status.values()), len(self.status),
+                                frozenset(self.failed), {t: j.task.object for t, j in self.jobs.items()}))
 
     # -- views for the scheduler --------------------------------------------------------
     def team_snapshot(self) -> TeamSnapshot:

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from conftest import CASE_STUDY
 from lvws_ros.core.schedule import check_schedule
@@ -144,6 +146,34 @@ def test_frames_and_gif(tmp_path):
     gif = render_gif(sim.cfg, sim.trace, 14, tmp_path / "run.gif")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert gif.read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+    from PIL import Image
+
+    with Image.open(gif) as im:
+        assert im.size[0] >= 800 and im.size[1] >= 800 and im.n_frames == len(sim.trace)
+
+
+def test_a_frame_shows_links_a_legend_and_labels_that_never_overlap():
+    import matplotlib.pyplot as plt
+
+    from lvws_ros.sim.render import _figure, draw_frame
+
+    sim = CellSim(load_cell_config(CASE_STUDY))
+    run_offline(sim, make_policy("lvws"), frame_every=1.0)
+    carrying = next(f for f in sim.trace if len([t for t in f.robot_task.values() if t == "t10"]) == 2)
+    fig, ax = _figure()
+    draw_frame(ax, sim.cfg, carrying, 14)
+    fig.canvas.draw()
+    assert fig.legends and {t.get_text() for t in fig.legends[0].get_texts()} >= {"Jackal", "Husky", "failed",
+                                                                                   "subteam link to its object"}
+    labels = [t for t in ax.texts if ": " in t.get_text()]
+    assert len(labels) == len(sim.cfg.robots)
+    boxes = [t.get_window_extent() for t in labels]  # pixels, as drawn
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1:]:
+            assert not a.overlaps(b), (a, b)
+    purple = [ln for ln in ax.lines if ln.get_color() == "tab:purple"]
+    assert len(purple) >= 2  # the t10 subteam: one link per member
+    plt.close(fig)
 
 
 def _write(tmp_path: Path, mutate) -> Path:
@@ -189,3 +219,16 @@ def test_lvws_sim_command_writes_schedule_and_frames(tmp_path):
     assert len(sched.assignments) == 14
     frames = sorted((tmp_path / "f").glob("frame_*.png"))
     assert len(frames) >= sched.makespan / 20 and frames[0].read_bytes()[:4] == b"\x89PNG"
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(0.5, 4)), min_size=1, max_size=12))
+def test_placed_labels_never_overlap(items):
+    from lvws_ros.sim.render import place_labels
+
+    height = 0.5
+    spots = place_labels([(x, y) for x, y, _ in items], [w for _, _, w in items], height)
+    boxes = [(left, top, w) for (left, top), (_, _, w) in zip(spots, items, strict=True)]
+    for i, (l1, t1, w1) in enumerate(boxes):
+        for l2, t2, w2 in boxes[i + 1:]:
+            assert not (l1 < l2 + w2 and l2 < l1 + w1 and abs(t1 - t2) < height - 1e-9)
