@@ -23,7 +23,7 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 
-$(VENV)/.stamp-deps: requirements.txt | $(PY)
+$(VENV)/.stamp-deps: requirements.txt requirements-python.txt | $(PY)
 	$(PY) -m pip install --quiet -r requirements.txt
 	touch $@
 

@@ -23,6 +23,7 @@ setup(
         (f"share/{PACKAGE}/config", sorted(glob("config/*"))),
     ],
     install_requires=["setuptools"],
+    extras_require={"test": ["pytest"]},  # colcon test runs the suite with pytest
     zip_safe=False,
     maintainer="lvws_ros maintainers",
     maintainer_email="maintainers@lvws-ros.org",
