@@ -53,7 +53,7 @@ $(VENV)/.stamp-pkg: $(PKG_SRCS) $(VENV)/.stamp-msgs
 msgs: $(VENV)/.stamp-msgs
 
 test: env lint
-	$(PY) -m pytest -q test
+	$(PY) -m pytest -q -rs test  # -rs: every skip prints its reason
 
 # The paper's case study end to end: cell_sim + scheduler (default policy, the shipped
 # LVWS model) + recorder; the bag lands in bags/, Gantt PNG, GIF and logs in out/.
