@@ -4,6 +4,8 @@
 * the exact expert on Dataset I test instances: share proven optimal, solve times;
 * the baselines' suboptimality on the Dataset I test split beside the paper's figures;
 * Fig. 5: LVWS decision rate and accumulated runtime for N robots x M tasks (PNG);
+* the ROS runtime, and a dynamic world (scripted cancel, late order, failures, repairs):
+  decision latency under events, replanning and restart after each failure;
 * scale (:mod:`lvws_ros.cli.bench_scale`): whole schedules at 100 x 500 and 1000 x 5000 on
   our generator and a subteam-heavy family, node decision latency, the expert on large teams.
 """
@@ -200,6 +202,47 @@ def bench_runtime(policy: str = "lvws", rate: float = 20.0, flood: int = 5000) -
               f"{'no loss' if got == sent else f'{sent - got} lost'} |")
 
 
+def bench_dynamic(policy: str = "lvws", rate: float = 20.0) -> None:
+    """The case study with scripted events (config/events_example.yaml: a cancel, a late
+    order, two failures mid-task, two repairs) on ROS: decision latency under events, and
+    for each failure the replanning decision (sim time after the failure, its latency) and
+    when the interrupted task started again."""
+    import re
+    import tempfile
+
+    from lvws_ros.cli.report import report
+    from lvws_ros.ros.bag import read_run
+    from lvws_ros.ros.launcher import launch
+    from lvws_ros.ros.resources import events_example
+
+    events = events_example()
+    print(f"\n## Dynamic world (case study + {events.name}, policy {policy}, rate {rate:g}x, sync)")
+    with tempfile.TemporaryDirectory() as tmp:
+        res = launch(policy=policy, rate=rate, bag_dir=Path(tmp) / "bags", out_dir=Path(tmp) / "out", name="dyn",
+                     gif=False, events=str(events), log=lambda _t: None)
+        rep, run, s = report(res.bag), read_run(res.bag), res.summary
+        print("| figure | value |\n|---|---|")
+        print(f"| tasks done / makespan | {s['tasks_done']}/{s['tasks']}, {s['makespan']:.2f} s (sim) |")
+        print(f"| world events | {'; '.join(s['world_events'])} |")
+        print(f"| decisions / rejected assignments | {len(run.decisions)} / {len(s['rejected'])} |")
+        print(f"| decision latency p50 / p99 under events (from the bag) | {rep.latency_ms_p50:.2f} / "
+              f"{rep.latency_ms_p99:.2f} ms |")
+        for text in s["world_events"]:
+            m = re.match(r"t=([0-9.]+): (\S+) interrupted \(subteam (\S+) released\)", text)
+            if not m:
+                continue
+            t_fail, task = float(m.group(1)), m.group(2)
+            after = [d for d in run.decisions if max(d.team_stamp, d.graph_stamp) >= t_fail - 1e-9]
+            replan = after[0] if after else None
+            again = next((d for d in after if any(t == task for t, _ in d.assignments)), None)
+            print(f"| failure at t={t_fail:g} s ({task} interrupted) | replanned at t="
+                  f"{max(replan.team_stamp, replan.graph_stamp):.2f} s in {1000 * replan.latency:.2f} ms; "
+                  if replan else f"| failure at t={t_fail:g} s ({task} interrupted) | no decision after it; ", end="")
+            print(f"{task} restarted at t={max(again.team_stamp, again.graph_stamp):.2f} s with "
+                  f"{'+'.join(next(r for t, r in again.assignments if t == task))} |" if again
+                  else f"{task} not restarted |")
+
+
 def _flood_recorder(bag: Path, hz: int, seconds: float) -> tuple[int, int, float]:
     import copy
     import signal
@@ -255,7 +298,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-limit", type=float, default=60.0)
     parser.add_argument("--model", default=None, help="LVWS checkpoint for Fig. 5 (default: the shipped one)")
     parser.add_argument("--fig5-png", default="docs/fig5.png")
-    parser.add_argument("--only", choices=["core", "fig5", "runtime", "scale"], default=None)
+    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale"], default=None)
     parser.add_argument("--scale-limit", type=float, default=600.0, help="wall seconds per whole-schedule run")
     args = parser.parse_args(argv)
     print(f"# lvws_ros benchmarks — {machine()}")
@@ -272,6 +315,8 @@ def main(argv: list[str] | None = None) -> int:
         bench_scale(args.seed, args.scale_limit)
     if args.only in (None, "runtime"):
         bench_runtime()
+    if args.only in (None, "dynamic"):
+        bench_dynamic()
     return 0
 
 

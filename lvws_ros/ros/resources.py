@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 
-__all__ = ["case_study_config", "msg_dir", "share_path"]
+__all__ = ["case_study_config", "events_example", "msg_dir", "share_path"]
 
 SOURCE_TREE = Path(__file__).resolve().parents[2]
 
@@ -29,6 +29,11 @@ def share_path(package: str, relative: str, source: str) -> Path:
 def case_study_config() -> Path:
     """The paper's assembly-cell case study, ``config/assembly_cell.yaml``."""
     return share_path("lvws_ros", "config/assembly_cell.yaml", "config/assembly_cell.yaml")
+
+
+def events_example() -> Path:
+    """Scripted world events for the case study, ``config/events_example.yaml``."""
+    return share_path("lvws_ros", "config/events_example.yaml", "config/events_example.yaml")
 
 
 def msg_dir() -> Path:
