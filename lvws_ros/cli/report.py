@@ -24,8 +24,7 @@ from lvws_ros.core.online import (
     TeamSnapshot,
     build_instance,
     build_state,
-    schedulable,
-    snapshot_key,
+    scheduling_view,
     still_pending,
 )
 from lvws_ros.core.problem import Instance, Robot, Task
@@ -164,9 +163,9 @@ def decision_inputs(run: Run, ack_timeout: float = 5.0) -> Iterator[tuple[Online
         if team is None or graph is None:
             raise BagError(f"{run.path}: decision {d.step} names inputs the bag does not hold "
                            f"(team {d.team_stamp}, graph {d.graph_stamp})")
-        view, _ = schedulable(team, graph)  # what the scheduler could schedule (robots may have failed)
-        if inst is None or snapshot_key(team, view) != key:  # tasks or robots came or went
-            inst, key = build_instance(team, view), snapshot_key(team, view)
+        view, view_key, _ = scheduling_view(team, graph)  # as the scheduler saw it (robots may have failed)
+        if inst is None or view_key != key:  # tasks or robots came or went
+            inst, key = build_instance(team, view), view_key
         now = max(team.stamp, graph.stamp)
         pending = still_pending(pending, graph, now, ack_timeout, team)
         yield d, team, graph, build_state(inst, team, view, {k: v[0] for k, v in pending.items()})

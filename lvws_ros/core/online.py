@@ -218,6 +218,15 @@ def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot
     return replace(graph, tasks=kept), held
 
 
+def scheduling_view(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot, tuple[Any, ...],
+                                                                        dict[str, str]]:
+    """What a decision is made on: the schedulable part of the snapshots
+    (:func:`schedulable`), the key of its instance (:func:`snapshot_key`: build a new one
+    when it changes) and the tasks held back."""
+    view, held = schedulable(team, graph)
+    return view, snapshot_key(team, view), held
+
+
 def unready(graph: GraphSnapshot) -> list[tuple[str, str]]:
     """(task, prerequisite) for each task the graph calls READY although a prerequisite
     is not DONE: such a task is not ready."""
@@ -379,7 +388,7 @@ class OnlineScheduler:
     def instance(self) -> Instance:
         """The instance of the schedulable part of the latest snapshots (:func:`schedulable`)."""
         assert self.team is not None and self.graph is not None
-        view, held = schedulable(self.team, self.graph)
+        view, key, held = scheduling_view(self.team, self.graph)
         if sorted(held) != self._held:
             self._held = sorted(held)
             if held:
@@ -387,7 +396,6 @@ class OnlineScheduler:
                 self.notices.append(f"task(s) {', '.join(first)} cannot be covered by the robots present: held back "
                                     f"with {len(held) - len(first)} task(s) waiting on them until robots come back")
         self._view = view
-        key = snapshot_key(self.team, view)
         if key != self._key or self._inst is None:
             self._inst = build_instance(self.team, view)
             self._key = key

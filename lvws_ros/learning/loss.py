@@ -107,8 +107,9 @@ def imitation_loss(r: Tensor, t: Targets, rows: Tensor, lam: float, choice_weigh
     ranking that the greedy matching reads.
 
     With ``wait_logits`` (the wait head, ours) and ``wait_weight`` > 0, the binary cross
-    entropy of each row that could work (a feasible ready task) against the expert keeping
-    it waiting, the waits weighted by ``wait_pos_weight`` (class balance: they are rare).
+    entropy of the rows :func:`wait_targets` selects (the expert's voluntary waits and the
+    robots it puts to work) against the expert waiting, the waits weighted by
+    ``wait_pos_weight`` (class balance: they are rare).
     """
     diff = (r - t.e).abs() * t.valid
     count = t.valid.sum().clamp(min=1)

@@ -205,7 +205,7 @@ def read_run(path: str | Path) -> Run:
             run.namespace = cells[0] if cells else "/"
             for conn, _t_ns, raw in reader.messages():
                 name = names[conn.topic]
-                if name is not None and name[1] in wanted:
+                if name is not None and name[1] in wanted and (name[1] != DIAGNOSTICS_TOPIC or name[0] == run.namespace):
                     _add(run, name[1], reader.deserialize(raw, conn.msgtype))
     except BagError:
         raise

@@ -12,8 +12,10 @@ The world changes while it runs (the dynamic protocol of the README): scripted e
 (parameter ``events``, :mod:`lvws_ros.sim.events`) and the services ``submit_tasks``
 (lvws_msgs/srv/SubmitTasks), ``cancel_task`` (CancelTask) and ``set_robot_fault``
 (SetRobotFault), relative to the node's namespace (``lvws submit / cancel / fault``).
-When the robots left can never do a task (and no scripted repair or cancel is still to
-come), the run ends at once with that reason (exit 1).
+When the robots left can never do a task and no scripted repair or cancel is still to
+come, the run ends with that reason (exit 1): at once after a scripted event; after
+``stuck_grace`` wall seconds with nothing running after a service call (time to call
+``set_robot_fault`` with a repair; the service's answer says so).
 """
 
 from __future__ import annotations
@@ -47,7 +49,8 @@ DESCRIPTION = (
     "decision steps until answered, default true), sync_timeout (wall s), expect_subscribers (start once "
     "this many nodes subscribe, default 1), wait_for_subscribers (wall s), "
     "max_sim_time (s), summary (JSON path), gif (animated GIF path), frame_every (sim s between GIF frames), "
-    "events (scripted world events, YAML)."
+    "events (scripted world events, YAML), stuck_grace (wall s a run waits for a repair after a service made a "
+    "task impossible, default 10)."
 )
 PROGRESS_SECONDS = 2.0  # wall seconds between progress lines (lvws launch shows them)
 ROBOT_COLORS = {"panda": (1.0, 0.5, 0.0), "jackal": (0.1, 0.4, 0.9), "husky": (0.1, 0.7, 0.2)}
@@ -105,6 +108,8 @@ class CellSimNode(Node):
         events_path = str(self.declare_parameter("events", "").value)
         self.later: list[WorldEvent] = load_events(events_path) if events_path else []
         self.world_events: list[str] = []  # what happened, for the summary
+        self.stuck_grace = float(self.declare_parameter("stuck_grace", 10.0).value)
+        self.stuck_since: float | None = None  # wall time a service call made the run impossible
         if self.rate <= 0:
             raise LvwsError(f"parameter rate must be > 0, got {self.rate}")
         self.sim = CellSim(load_cell_config(cfg_path or case_study_config()))
@@ -170,10 +175,8 @@ class CellSimNode(Node):
 
     # -- the world changes ------------------------------------------------------------------
     def on_submit(self, req: SubmitTasks.Request, res: SubmitTasks.Response) -> SubmitTasks.Response:
-        tasks = [{"id": t.id, "type": t.type, "object": t.object, "cell": t.cell, "to": t.cell,
-                  **({"from": t.source} if t.source else {}), "duration": t.duration, "payload": t.payload,
-                  "after": list(t.after)} for t in req.tasks]
-        return self.answer(WorldEvent(self.sim.time, "submit", tasks=tuple(tasks)), res)
+        tasks = tuple(convert.cell_task_from_msg(t) for t in req.tasks)
+        return self.answer(WorldEvent(self.sim.time, "submit", tasks=tasks), res)
 
     def on_cancel(self, req: CancelTask.Request, res: CancelTask.Response) -> CancelTask.Response:
         return self.answer(WorldEvent(self.sim.time, "cancel", target=req.task_id), res)
@@ -187,17 +190,21 @@ class CellSimNode(Node):
             res.success, res.message = False, "the run is over"
             return res
         try:
-            events = self.apply(event)
+            events = self.apply(event, scripted=False)
         except WorldEventRejected as exc:
             res.success, res.message = False, str(exc)
             self.get_logger().warning(f"t={self.sim.time:.2f}: {event.kind} refused: {exc}")
             return res
         res.success, res.message = True, "; ".join(self.describe(e) for e in events)
+        reason = stuck_reason(self.sim, self.later)
+        if reason:
+            res.message += f". Warning: the run {reason}; it ends in {self.stuck_grace:g} s unless a robot is repaired"
         return res
 
-    def apply(self, event: WorldEvent) -> list[Event]:
-        """Apply a world event, publish the new state (the scheduler replans at once) and
-        end the run if the world can never finish."""
+    def apply(self, event: WorldEvent, scripted: bool = True) -> list[Event]:
+        """Apply a world event and publish the new state (the scheduler replans at once). A
+        scripted event that leaves the world unable to finish ends the run; after a service
+        call, :meth:`check_stuck` gives it ``stuck_grace``."""
         events = apply_event(self.sim, event)
         for e in events:
             text = f"t={self.sim.time:.2f}: {self.describe(e)}"
@@ -208,10 +215,22 @@ class CellSimNode(Node):
             self.publish_markers()
             if self.sync and self.decision_due():
                 self.waiting_since = time.monotonic()
-        reason = stuck_reason(self.sim, self.later)
-        if reason:
+        if scripted and (reason := stuck_reason(self.sim, self.later)):
             self.finish(reason)
         return events
+
+    def check_stuck(self) -> None:
+        """End a run that can never finish once nothing runs and ``stuck_grace`` has passed."""
+        reason = stuck_reason(self.sim, self.later)
+        if not reason or self.sim.jobs:
+            self.stuck_since = None
+            return
+        if self.stuck_since is None:
+            self.stuck_since = time.monotonic()
+            self.get_logger().warning(f"t={self.sim.time:.2f}: the run {reason}; it ends in {self.stuck_grace:g} s "
+                                      "unless a robot is repaired")
+        elif time.monotonic() - self.stuck_since > self.stuck_grace:
+            self.finish(reason)
 
     @staticmethod
     def describe(e: Event) -> str:
@@ -275,6 +294,7 @@ class CellSimNode(Node):
                 self.apply(event)
             except WorldEventRejected as exc:
                 self.finish(f"scripted event at t={event.at:g} ({event.kind} {event.target}) refused: {exc}")
+        self.check_stuck()
         if self.finished:
             return
         if self.waiting_since is not None:

@@ -10,13 +10,15 @@ import math
 from typing import Any
 
 from builtin_interfaces.msg import Duration, Time
-from lvws_msgs.msg import Assignment, AssignmentArray, RobotState, Task, TaskGraph, TeamState
+from lvws_msgs.msg import Assignment, AssignmentArray, CellTask, RobotState, Task, TaskGraph, TeamState
 
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskInfo, TeamSnapshot
+from lvws_ros.errors import ConfigError
+from lvws_ros.sim.config import PART_PAYLOAD
 
-__all__ = ["decision_from_msg", "decision_to_msg", "from_time", "graph_from_msg", "graph_to_msg", "team_from_msg",
-           "team_to_msg", "to_duration", "to_time"]
+__all__ = ["cell_task_from_msg", "cell_task_to_msg", "decision_from_msg", "decision_to_msg", "from_time",
+           "graph_from_msg", "graph_to_msg", "team_from_msg", "team_to_msg", "to_duration", "to_time"]
 
 
 def to_time(seconds: float) -> Time:
@@ -99,3 +101,28 @@ def decision_from_msg(msg: Any) -> OnlineDecision:
     return OnlineDecision(int(msg.decision_step), tuple((a.task_id, tuple(a.robot_ids)) for a in msg.assignments),
                           tuple(msg.waiting_robot_ids), from_time(msg.decision_latency), from_time(msg.team_stamp),
                           from_time(msg.graph_stamp), msg.policy)
+
+
+def cell_task_to_msg(item: dict[str, Any], k: int = 0) -> CellTask:
+    """A task entry of the cell config (``from``/``to`` or ``cell``) as a CellTask
+    (ConfigError naming entry ``k``)."""
+    try:
+        return CellTask(id=str(item["id"]), type=str(item["type"]), object=str(item.get("object", "")),
+                        source=str(item.get("from", "")), cell=str(item.get("to", item.get("cell", ""))),
+                        duration=float(item.get("duration", 0.0)), payload=float(item.get("payload", PART_PAYLOAD)),
+                        after=[str(a) for a in item.get("after", [])])
+    except KeyError as exc:
+        raise ConfigError(f"task {k}: missing key {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"task {k}: {exc}") from None
+
+
+def cell_task_from_msg(msg: Any) -> dict[str, Any]:
+    """A CellTask as a task entry of the cell config (the inverse of :func:`cell_task_to_msg`)."""
+    entry: dict[str, Any] = {"id": msg.id, "type": msg.type, "object": msg.object, "duration": msg.duration,
+                             "payload": msg.payload, "after": list(msg.after)}
+    if msg.type == "transport":
+        entry.update({"from": msg.source, "to": msg.cell})
+    else:
+        entry["cell"] = msg.cell
+    return entry

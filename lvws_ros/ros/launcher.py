@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+import yaml
+
 from lvws_ros.errors import ConfigError, LaunchError, PolicyError
 from lvws_ros.ros.topics import CLOCK_REMAP
 
@@ -87,21 +89,19 @@ def _tail(path: Path, lines: int = 15) -> str:
 
 
 def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: str, rate: float, config: str,
-              params_file: str | None, summary: Path, gif: Path | None, sync: bool,
+              file_params: dict[str, Any], summary: Path, gif: Path | None, sync: bool,
               namespace: str = "", events: str | None = None) -> dict[str, list[str]]:
     """The three children's command lines, recorder first, simulator last."""
-    from lvws_ros.ros.scheduler_node import DEFAULT_POLICY, check_params_file
+    from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
 
-    in_file = check_params_file(params_file) if params_file else {}
-    # the world and the recorder: neither may miss the first decision
+    # one precedence, applied here: explicit arguments > the parameter file (its values for
+    # this node, ``file_params``) > our defaults; the file's values go on as -p (rcl would
+    # not match a file's `scheduler:` to /<ns>/scheduler)
     defaults = {"policy": DEFAULT_POLICY, "seed": 0, "use_sim_time": True, "expect_subscribers": 2}
     explicit = {k: v for k, v in (("policy", policy), ("seed", seed), ("model_path", model_path or None))
                 if v is not None}
-    sched: dict[str, object] = {k: v for k, v in defaults.items() if k not in in_file}
-    sched.update(explicit)
+    sched: dict[str, object] = {**defaults, **file_params, **explicit}
     sched_params = [a for k, v in sched.items() for a in ("-p", f"{k}:={_param(v)}")]
-    if params_file:
-        sched_params = ["--params-file", params_file, *sched_params]
     sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary}", "-p", "expect_subscribers:=2",
                   "-p", f"sync:={'true' if sync else 'false'}"]
     if gif is not None:
@@ -120,8 +120,13 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
 
 
 def _param(value: object) -> str:
-    """A value as ``-p name:=value`` takes it (YAML)."""
-    return ("true" if value else "false") if isinstance(value, bool) else str(value)
+    """A value as ``-p name:=value`` takes it (YAML; a string that YAML would read as
+    another type is quoted)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return value if isinstance(yaml.safe_load(value or "''"), str) else f"'{value}'"
+    return str(value)
 
 
 def check_namespace(namespace: str) -> str:
@@ -140,7 +145,8 @@ def check_namespace(namespace: str) -> str:
 
 
 def _check_inputs(policy: str | None, model_path: str, config: str, params_file: str | None,
-                  events: str | None = None) -> None:
+                  events: str | None = None, namespace: str = "") -> dict[str, Any]:
+    """Every input checked before anything starts; the parameter file's scheduler values."""
     from lvws_ros.registry import POLICY_NAMES
     from lvws_ros.ros.resources import case_study_config
     from lvws_ros.ros.scheduler_node import check_params_file
@@ -151,12 +157,12 @@ def _check_inputs(policy: str | None, model_path: str, config: str, params_file:
         from lvws_ros.sim.events import load_events
 
         load_events(events)
-    if params_file:
-        check_params_file(params_file)
+    in_file = check_params_file(params_file, namespace=namespace) if params_file else {}
     if policy is not None and policy not in POLICY_NAMES:
         raise PolicyError(f"unknown policy {policy!r}; choose one of {', '.join(POLICY_NAMES)}")
     if model_path and not Path(model_path).is_file():
         raise ConfigError(f"{model_path}: no such model file")
+    return in_file
 
 
 def _child_env(domain_id: int | None) -> dict[str, str]:
@@ -228,9 +234,9 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     The configuration, the parameter file, the policy, the model and the namespace are
     checked before any process starts (ConfigError / PolicyError). ``policy``/``seed``
     None: the parameter file's, else the scheduler's defaults."""
-    _check_inputs(policy, model_path, config, params_file, events)
     namespace = check_namespace(namespace)
-    label = policy or (check_params_file_policy(params_file) if params_file else None) or "lvws"
+    in_file = _check_inputs(policy, model_path, config, params_file, events, namespace)
+    label = policy or str(in_file.get("policy", "lvws"))
     cell = f"{namespace.strip('/').replace('/', '-')}-" if namespace else ""
     run = name or time.strftime(f"case-study-{cell}{label}-%Y%m%d-%H%M%S")
     bag = Path(bag_dir) / run
@@ -241,7 +247,7 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     summary_path = out / "summary.json"
     gif_path = out / "run.gif"
     commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
-                         params_file=params_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
+                         file_params=in_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
                          namespace=namespace, events=events)
     children: list[Child] = []
     interrupted: list[int] = []
@@ -268,14 +274,6 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     summary.update({"wall_seconds_total": time.monotonic() - t0, "exit_codes": codes})
     summary_path.write_text(json.dumps(summary, indent=1))
     return LaunchResult(bag, out, summary, gif_path if gif_path.is_file() else None, codes)
-
-
-def check_params_file_policy(params_file: str) -> str | None:
-    """The policy a scheduler parameter file sets, if any."""
-    from lvws_ros.ros.scheduler_node import check_params_file
-
-    value = check_params_file(params_file).get("policy")
-    return None if value is None else str(value)
 
 
 def _wait_for_line(child: Child, text: str, timeout: float, interrupted: list[int]) -> None:

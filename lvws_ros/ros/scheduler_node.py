@@ -11,7 +11,9 @@ second and on every event, with the node's fully qualified name as ``hardware_id
 Parameters (PARAMETERS: type, default, description, range; ``ros2 param describe``
 shows them): policy, fallback_policy, model_path, seed, decision_budget_ms and
 ack_timeout may change at runtime: the on-set callback builds the new policies and
-applies them, or refuses the change with the reason (an unknown policy, a missing model).
+applies them, or refuses the change with the reason (an unknown policy, a missing model,
+a number out of range; without a fallback, also a policy that cannot serve the current
+cell).
 expect_subscribers is read-only. use_sim_time is rclpy's.
 """
 
@@ -32,6 +34,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -95,14 +98,19 @@ SUBSCRIBER_WAIT = 20.0  # wall seconds the first decision waits for expect_subsc
 SETTLE_SECONDS = 0.2  # wall time to wait for the matching team/graph message
 
 
+def _of_kind(value: Any, kind: type) -> bool:
+    """rclpy's typing: a bool is not an int, an int is not a float."""
+    return isinstance(value, kind) and (kind is bool or not isinstance(value, bool))
+
+
 def check_value(name: str, value: Any) -> str:
     """Why ``value`` is not valid for parameter ``name`` ('' if it is)."""
     if name not in PARAMETERS:
         return f"unknown parameter (known: {', '.join(PARAMETERS)})"
     par = PARAMETERS[name]
-    if not isinstance(value, par.kind) or (par.kind is not bool and isinstance(value, bool)):
-        if not (par.kind is float and isinstance(value, int) and not isinstance(value, bool)):
-            return f"expected {par.kind.__name__}, got {value!r}"
+    if not _of_kind(value, par.kind):
+        hint = f" (write {value}.0)" if par.kind is float and isinstance(value, int) else ""
+        return f"expected {par.kind.__name__}, got {value!r}{hint}"  # rclpy's rule: 5 is not a float
     if par.low is not None and par.high is not None and not par.low <= value <= par.high:
         return f"{value!r} is out of range [{par.low:g}, {par.high:g}]"
     if name in ("policy", "fallback_policy") and value not in POLICY_NAMES and not (name == "fallback_policy"
@@ -114,10 +122,11 @@ def check_value(name: str, value: Any) -> str:
     return ""
 
 
-def check_params_file(path: str | Path, node: str = "scheduler") -> dict[str, Any]:
-    """The scheduler's parameters in a ROS 2 params file (``<node>:`` or ``/**:`` then
-    ``ros__parameters:``), checked without starting anything: ConfigError naming the
-    file and the parameter."""
+def check_params_file(path: str | Path, node: str = "scheduler", namespace: str = "") -> dict[str, Any]:
+    """The scheduler's parameters in a ROS 2 params file, checked without starting
+    anything: ConfigError naming the file and the parameter. Sections read, later ones
+    winning (rcl's matching of a node's fully qualified name): ``/**``, ``/**/<node>``,
+    ``<node>`` and ``/<node>`` (root namespace), ``<namespace>/<node>``."""
     p = Path(path)
     try:
         data = yaml.safe_load(p.read_text())
@@ -127,8 +136,10 @@ def check_params_file(path: str | Path, node: str = "scheduler") -> dict[str, An
         raise ConfigError(f"{p}: malformed YAML: {exc}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping of node names to ros__parameters")
+    ns = namespace.rstrip("/")
+    keys = ["/**", f"/**/{node}", *([node, f"/{node}"] if not ns else []), *([f"{ns}/{node}"] if ns else [])]
     params: dict[str, Any] = {}
-    for key in ("/**", node, f"/{node}"):
+    for key in keys:
         section = data.get(key)
         if section is None:
             continue
@@ -161,10 +172,13 @@ class SchedulerNode(Node):
     def __init__(self) -> None:
         super().__init__("scheduler")
         for name, par in PARAMETERS.items():
-            if name == "use_sim_time":  # declared by rclpy: only described here
-                self.set_descriptor(name, par.descriptor())
-            else:
-                self.declare_parameter(name, par.default, par.descriptor())
+            try:
+                if name == "use_sim_time":  # declared by rclpy: only described here
+                    self.set_descriptor(name, par.descriptor())
+                else:
+                    self.declare_parameter(name, par.default, par.descriptor())
+            except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+                raise LvwsError(f"parameter {name}: {exc}") from None
         values = self.values()
         for name, value in values.items():  # overrides from the command line or a params file
             why = check_value(name, value)
@@ -218,7 +232,9 @@ class SchedulerNode(Node):
         if names & set(RUNTIME_POLICY_PARAMETERS):
             try:
                 policy, fallback = build_policies(values)
-            except Exception as exc:  # a model that does not load, an option the policy refuses
+                if self.core.team is not None and self.core.graph is not None and fallback is None:
+                    policy.reset(self.core.instance())  # no fallback: the new policy must serve this cell
+            except Exception as exc:  # a model that does not load, a policy that cannot serve the cell
                 return SetParametersResult(successful=False, reason=f"{type(exc).__name__}: {exc}")
             self.core.set_policies(policy, fallback)
             self.policy_name, self.seed = str(values["policy"]), int(values["seed"])

@@ -16,6 +16,7 @@ from typing import Any
 import yaml
 
 from lvws_ros.errors import ConfigError, LvwsError
+from lvws_ros.ros.convert import cell_task_to_msg
 
 __all__ = ["SERVICES", "call_world", "tasks_from_file"]
 
@@ -38,20 +39,6 @@ def tasks_from_file(path: str | Path) -> list[dict[str, Any]]:
     return items
 
 
-def _cell_task(k: int, item: dict[str, Any]) -> Any:
-    from lvws_msgs.msg import CellTask
-
-    try:
-        return CellTask(id=str(item["id"]), type=str(item["type"]), object=str(item.get("object", "")),
-                        source=str(item.get("from", "")), cell=str(item.get("to", item.get("cell", ""))),
-                        duration=float(item.get("duration", 0.0)), payload=float(item.get("payload", 0.0)),
-                        after=[str(a) for a in item.get("after", [])])
-    except KeyError as exc:
-        raise ConfigError(f"task {k}: missing key {exc}") from None
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"task {k}: {exc}") from None
-
-
 def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]] = (), target: str = "",
                failed: bool = True, domain_id: int | None = None, timeout: float = 20.0) -> tuple[bool, str]:
     """Call one of the simulator's services and return (accepted, message); LvwsError when
@@ -64,7 +51,7 @@ def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]
 
     if kind == "submit":
         srv: Any = SubmitTasks
-        request = SubmitTasks.Request(tasks=[_cell_task(k, t) for k, t in enumerate(tasks)])
+        request = SubmitTasks.Request(tasks=[cell_task_to_msg(t, k) for k, t in enumerate(tasks)])
     elif kind == "cancel":
         srv, request = CancelTask, CancelTask.Request(task_id=target)
     elif kind == "fault":

@@ -16,10 +16,11 @@ import yaml
 
 from lvws_ros.errors import ConfigError
 
-__all__ = ["ARM_KINDS", "MOBILE_KINDS", "CellConfig", "CellSpec", "ObjectSpec", "RobotSpec", "TaskSpec",
+__all__ = ["ARM_KINDS", "MOBILE_KINDS", "PART_PAYLOAD", "CellConfig", "CellSpec", "ObjectSpec", "RobotSpec", "TaskSpec",
            "load_cell_config", "parse_task"]
 
 ARM_KINDS = ("panda",)
+PART_PAYLOAD = 0.1  # an assembly's part when its entry names none
 MOBILE_KINDS = ("jackal", "husky")
 
 
@@ -140,7 +141,8 @@ def parse_task(t: dict[str, Any], cells: Mapping[str, CellSpec], objects: Mappin
             raise ConfigError(f"task {tid}: unknown cell {t.get('cell')!r}")
         return TaskSpec(tid, "assembly", str(t["object"]), str(t["cell"]),
                         duration=_num(t["duration"], f"task {tid} duration"),
-                        payload=_num(t.get("payload", 0.1), f"task {tid} payload", positive=False), after=after)
+                        payload=_num(t.get("payload", PART_PAYLOAD), f"task {tid} payload", positive=False),
+                        after=after)
     raise ConfigError(f"task {tid}: unknown type {t['type']!r} (transport | assembly)")
 
 

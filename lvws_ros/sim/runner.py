@@ -36,6 +36,8 @@ def run_offline(sim: CellSim, policy: Policy, *, max_time: float = 3600.0,
             online.offer_team(sim.team_snapshot())
             online.offer_graph(sim.graph_snapshot())
             d = online.decide()
+            online.notices.clear()  # nobody reads them here (the node reports them)
+            online.changes.clear()
             if d is not None:
                 decisions.append(d)
                 for task, robots in d.assignments:

@@ -210,8 +210,9 @@ class CellSim:
             if arm.cell != spec.cell:
                 raise AssignmentRejected(f"task {task_id}: {arm.id} is at {arm.cell}, the work is at {spec.cell}")
             if self.object_cell[obj.id] != spec.cell:
-                raise AssignmentRejected(f"task {task_id}: {obj.id} is not at {spec.cell} "
-                                         f"(it is at {self.object_cell[obj.id] or 'a robot'})")
+                at = self.object_cell[obj.id]
+                where = "on a robot" if at is None else "on the floor" if at == FLOOR else f"at {at}"
+                raise AssignmentRejected(f"task {task_id}: {obj.id} is not at {spec.cell} (it is {where})")
             if shortfall(True, arm.payload, True, spec.payload)[1] > 0:
                 raise AssignmentRejected(f"task {task_id}: {arm.id} handles {arm.payload:g}, the part weighs "
                                          f"{spec.payload:g}")
@@ -238,8 +239,8 @@ class CellSim:
         self.jobs[task_id] = job
 
     # -- a changing world ------------------------------------------------------------------
-    def _rebuild(self, tasks: Sequence[TaskSpec], objects: dict[str, Any] | None = None) -> None:
-        self.cfg = replace(self.cfg, tasks=tuple(tasks), objects=objects if objects is not None else self.cfg.objects)
+    def _rebuild(self, tasks: Sequence[TaskSpec]) -> None:
+        self.cfg = replace(self.cfg, tasks=tuple(tasks))
         self.inst = build_instance(self.cfg)
         self._task_spec = {t.id: t for t in self.cfg.tasks}
 
@@ -289,6 +290,12 @@ class CellSim:
             raise WorldEventRejected(f"unknown task {task_id!r}")
         if self.status[task_id] == DONE:
             raise WorldEventRejected(f"task {task_id} is done; only tasks not done can be cancelled")
+        spec = self._task_spec[task_id]
+        needs = sorted(t.id for t in self.cfg.tasks if t.id in self._descendants(task_id) and t.object == spec.object
+                       and self.status[t.id] != DONE)
+        if spec.type == "transport" and needs:  # they would wait for an object that never comes
+            raise WorldEventRejected(f"task {task_id} brings {spec.object} to {spec.cell} for {', '.join(needs)}: "
+                                     "cancel those first")
         events = []
         if task_id in self.jobs:
             events.append(Event(self.time, "interrupted", task_id, self._interrupt(task_id)))
@@ -297,6 +304,18 @@ class CellSim:
                        for t in self.cfg.tasks if t.id != task_id])
         self._refresh_ready()
         return [*events, Event(self.time, "cancelled", task_id, ())]
+
+    def _descendants(self, task_id: str) -> set[str]:
+        """The tasks that wait on ``task_id``, directly or not."""
+        out: set[str] = set()
+        stack = [task_id]
+        while stack:
+            k = stack.pop()
+            for t in self.cfg.tasks:
+                if k in t.after and t.id not in out:
+                    out.add(t.id)
+                    stack.append(t.id)
+        return out
 
     def fail(self, robot_id: str) -> list[Event]:
         """The robot stops where it is and leaves the team; its task returns READY."""

@@ -270,3 +270,31 @@ def test_the_fallback_decides_when_the_main_policy_cannot_and_says_so(at):
     bare.offer_graph(sim.graph_snapshot())
     with pytest.raises(PolicyError):
         bare.decide()
+
+
+def test_tasks_the_robots_present_cannot_cover_are_held_back_and_come_back():
+    """The only lifter leaves: the lifting task and the one waiting on it are held back
+    (WARN), the driving task is still scheduled; when the lifter is back, so are they. A
+    DONE task nobody present could do again does not block its dependents."""
+    from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
+
+    caps = ("lift", "drive")
+    lifter, driver = RobotInfo("l", "x", True, (1, 0), 5.0), RobotInfo("d", "y", True, (0, 1), 5.0)
+    graph = GraphSnapshot(1.0, caps, (
+        TaskInfo("lift0", 1, (1, 0), 1.0, 5.0), TaskInfo("after_lift", 0, (0, 1), 1.0, 2.0, ("lift0",)),
+        TaskInfo("drive0", 1, (0, 1), 1.0, 2.0), TaskInfo("old", 3, (1, 0), 1.0, 1.0, (), ("l",), 0.0, 1.0),
+        TaskInfo("after_old", 1, (0, 1), 1.0, 2.0, ("old",))))
+    online = OnlineScheduler(make_policy("grp"))
+    online.offer_team(TeamSnapshot(1.0, caps, (driver,)))
+    online.offer_graph(graph)
+    d = online.decide()
+    assert d is not None and {t for t, _ in d.assignments} <= {"drive0", "after_old"} and d.assignments
+    assert any("lift0 cannot be covered by the robots present" in n and "1 task(s) waiting" in n
+               for n in online.notices)
+    online.offer_team(TeamSnapshot(2.0, caps, (lifter, dataclasses.replace(driver, available=False,
+                                                                          current_task=d.assignments[0][0],
+                                                                          busy_for=1.0))))
+    online.offer_graph(dataclasses.replace(graph, stamp=2.0))
+    d2 = online.decide()
+    assert d2 is not None and ("lift0", ("l",)) in d2.assignments
+    assert any("robot(s) l joined the team" in c for c in online.changes)

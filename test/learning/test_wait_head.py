@@ -84,7 +84,7 @@ def test_lvws_with_the_wait_head_is_valid_and_never_stalls(model, threshold):
         inst = random_instance(np.random.default_rng(seed), 5, 14, "f")
         policy = LVWSPolicy(model=model, idle_bias=NO_VOLUNTARY_WAIT, wait_threshold=threshold)
         schedule = simulate(inst, policy).schedule
-        check_schedule(inst, schedule)
+        assert check_schedule(inst, schedule) == []
     assert LVWSPolicy(model=model, idle_bias=NO_VOLUNTARY_WAIT).wait_threshold is None  # no checkpoint: off
 
 
@@ -99,6 +99,6 @@ def test_the_rollout_proposes_the_heads_waits_and_stays_valid(model):
     inst = random_instance(np.random.default_rng(4), 5, 12, "f")
     rollout = LVWSRolloutPolicy(model=model, budget_ms=None)
     schedule = simulate(inst, rollout).schedule
-    check_schedule(inst, schedule)
+    assert check_schedule(inst, schedule) == []
     greedy = simulate(inst, GreedyPayloadPolicy()).schedule
     assert schedule.makespan <= greedy.makespan + 1e-9  # GRP's matching is a candidate at every step

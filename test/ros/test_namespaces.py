@@ -23,10 +23,14 @@ pytestmark = pytest.mark.ros
 def test_two_namespaced_cells_on_one_domain_complete_side_by_side(tmp_path: Path):
     domain = random.SystemRandom().randint(1, 101)
     cells = {"cellA": "grp", "cellB": "lvws"}
+    params = tmp_path / "params.yaml"  # cellA's policy comes from its own section of a params file
+    params.write_text("scheduler:\n  ros__parameters: {policy: dbgm}\n"
+                      "/cellA/scheduler:\n  ros__parameters: {policy: grp}\n")
+    choose = {"cellA": ["--params-file", str(params)], "cellB": ["--policy", "lvws"]}
     procs = {
         cell: subprocess.Popen(
             [sys.executable, "-m", "lvws_ros.cli", "launch", "--namespace", cell, "--domain-id", str(domain),
-             "--policy", policy, "--rate", "20", "--no-gif", "--name", cell, "--bag-dir", str(tmp_path / "bags"),
+             *choose[cell], "--rate", "20", "--no-gif", "--name", cell, "--bag-dir", str(tmp_path / "bags"),
              "--out-dir", str(tmp_path / "out"), "--timeout", "400"],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         for cell, policy in cells.items()}
@@ -41,7 +45,7 @@ def test_two_namespaced_cells_on_one_domain_complete_side_by_side(tmp_path: Path
         run = read_run(bag)
         assert run.namespace == f"/{cell}"
         assert all(t.startswith(f"/{cell}/") for t in run.topics), run.topics
-        assert {d.policy for d in run.decisions} <= {policy}
+        assert run.decisions and {d.policy for d in run.decisions} == {policy}
         assert {d["hardware_id"] for d in run.diagnostics} == {f"/{cell}/scheduler"}
         rep = report(bag)
         assert rep.complete and check_schedule(rep.instance, rep.schedule) == []

@@ -88,22 +88,43 @@ def test_parameters_under_a_namespace_switch_at_runtime_and_refuse_with_a_reason
 
 
 def test_params_file_wins_over_the_launchers_defaults_and_explicit_arguments_over_both(tmp_path):
-    params = tmp_path / "p.yaml"
-    params.write_text("scheduler:\n  ros__parameters:\n    policy: grp\n    seed: 7\n    use_sim_time: true\n")
+    from lvws_ros.ros.launcher import _check_inputs
 
-    def scheduler(**kw) -> list[str]:
+    params = tmp_path / "p.yaml"
+    params.write_text("scheduler:\n  ros__parameters:\n    policy: grp\n    seed: 7\n    use_sim_time: true\n"
+                      "/cellB/scheduler:\n  ros__parameters:\n    policy: rand\n")
+
+    def scheduler(namespace: str = "", **kw) -> list[str]:
+        file_params = _check_inputs(kw.get("policy"), "", "", str(params), namespace=namespace)
         args = {"policy": None, "seed": None, "model_path": "", "rate": 10.0, "config": "",
-                "params_file": str(params), "summary": tmp_path / "s.json", "gif": None, "sync": True, **kw}
-        return _commands(tmp_path / "bag", **args)["scheduler"]
+                "file_params": file_params, "summary": tmp_path / "s.json", "gif": None, "sync": True, **kw}
+        return _commands(tmp_path / "bag", namespace=namespace, **args)["scheduler"]
 
     cmd = scheduler()
-    assert "--params-file" in cmd and not any(a.startswith(("policy:=", "seed:=")) for a in cmd)
+    assert "policy:=grp" in cmd and "seed:=7" in cmd and "policy:=lvws" not in cmd  # the file over our defaults
     assert "expect_subscribers:=2" in cmd  # a default the file does not set
     cmd = scheduler(policy="exact", seed=3)
-    assert "policy:=exact" in cmd and "seed:=3" in cmd
-    assert cmd.index("--params-file") < cmd.index("policy:=exact")  # later wins in rcl
-    ns = _commands(tmp_path / "bag", policy=None, seed=None, model_path="", rate=10.0, config="", params_file=None,
-                   summary=tmp_path / "s.json", gif=None, sync=True, namespace="/cellB")
-    for name, cmd in ns.items():
+    assert "policy:=exact" in cmd and "seed:=3" in cmd and "policy:=grp" not in cmd  # explicit over the file
+    ns = scheduler(namespace="/cellB")
+    assert "policy:=rand" in ns and "seed:=0" in ns  # the cell's own section; `scheduler:` is the root's
+    every = _commands(tmp_path / "bag", policy=None, seed=None, model_path="", rate=10.0, config="", file_params={},
+                      summary=tmp_path / "s.json", gif=None, sync=True, namespace="/cellB")
+    for name, cmd in every.items():
         assert "__ns:=/cellB" in cmd and "/clock:=clock" in cmd, name
-    assert "use_sim_time:=true" in ns["recorder"]  # the bag is stamped in sim time
+    assert "use_sim_time:=true" in every["recorder"]  # the bag is stamped in sim time
+
+
+def test_a_float_parameter_given_an_int_is_refused_with_a_clear_message(tmp_path):
+    import subprocess
+    import sys
+
+    from lvws_ros.errors import ConfigError
+    from lvws_ros.ros.scheduler_node import check_params_file
+
+    params = tmp_path / "p.yaml"
+    params.write_text("scheduler:\n  ros__parameters:\n    ack_timeout: 5\n")
+    with pytest.raises(ConfigError, match=r"ack_timeout: expected float, got 5 \(write 5.0\)"):
+        check_params_file(params)
+    out = subprocess.run([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", "-p", "ack_timeout:=5"],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "parameter ack_timeout" in out.stderr and "Traceback" not in out.stderr

@@ -52,7 +52,7 @@ def test_a_robot_failing_mid_transport_puts_the_object_down_and_the_task_comes_b
     with pytest.raises(Exception, match="has failed"):
         sim.assign("t04", ["jackal_2"])
     sim.assign("t04", ["husky_1"])  # picks obj2 up where it lies
-    assert sim.jobs["t04"].targets["husky_1"] != sim._slot("cell_1", 0, 1)
+    assert sim.jobs["t04"].targets["husky_1"] == sim._slot(where, 0, 1)
     while sim.status["t04"] != DONE:
         sim.step()
     assert sim.object_cell["obj2"] == "cell_2" and sim.position("obj2") != where
@@ -84,6 +84,9 @@ def test_tasks_added_and_cancelled(sim):
     assert [e.kind for e in events] == ["interrupted", "cancelled"] and sim.robot_task["panda_1"] is None
     with pytest.raises(WorldEventRejected, match="unknown task"):
         sim.cancel("t01")
+    with pytest.raises(WorldEventRejected, match="t04 brings obj2 to cell_2 for t08, t11: cancel those first"):
+        sim.cancel("t04")  # t08 and t11 work on obj2 after it: they would wait forever
+    assert "t04" in sim.status
 
 
 @pytest.mark.parametrize("policy", ["grp", "lvws"])
@@ -93,6 +96,7 @@ def test_scripted_events_run_to_a_valid_schedule_of_the_final_tasks(sim, policy,
     events = load_events(path)
     assert [e.kind for e in events] == ["cancel", "fail", "submit", "repair"]  # time order
     sched, _ = run_offline(sim, make_policy(policy), events=events)
+    assert sim.failed == set()
     assert sorted(a.task for a in sched.assignments) == sorted({*(f"t{k:02d}" for k in range(1, 15)), "t15",
                                                                  "t16"} - {"t12"})
     assert check_schedule(sim.executed_instance(), sched) == []
