@@ -8,6 +8,7 @@ robots it leaves out take the idle task t_{M+1} (they wait until the next step).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -43,6 +44,8 @@ class State:
     task_start: FloatArray  # (M,) nan until started
     task_team: list[tuple[int, ...]]  # robots of each started task
     step: int = 0
+    # travel extension: the site each robot is at (or will be, when its task is done); None: no travel
+    robot_site: npt.NDArray[np.int64] | None = None
 
     @classmethod
     def initial(cls, inst: Instance) -> State:
@@ -54,6 +57,7 @@ class State:
             task_status=np.full(m, TaskStatus.QUEUED, dtype=np.int8),
             task_start=np.full(m, np.nan),
             task_team=[() for _ in range(m)],
+            robot_site=None if inst.travel is None else np.array(inst.travel.robot_site, dtype=np.int64),
         )
         state.refresh()
         return state
@@ -96,11 +100,24 @@ class State:
             if all(done[p] for p in inst.prerequisites[j]):
                 self.task_status[j] = TaskStatus.READY
 
+    def arrival(self, task: int, team: Sequence[int]) -> float:
+        """Seconds until the last member of ``team`` can be at ``task`` (0 without travel;
+        inf if a fixed member is elsewhere)."""
+        tr = self.instance.travel
+        if tr is None or self.robot_site is None:
+            return 0.0
+        return tr.arrival(team, [int(self.robot_site[r]) for r in team], task)
+
     def start(self, task: int, team: Sequence[int]) -> None:
+        """The subteam is busy from now: it travels to the task (travel extension), which
+        starts when its slowest member is there."""
+        start = self.time + self.arrival(task, team)
         self.task_status[task] = TaskStatus.ASSIGNED
-        self.task_start[task] = self.time
+        self.task_start[task] = start
         self.task_team[task] = tuple(sorted(team))
-        self.robot_free_at[list(team)] = self.time + self.instance.durations[task]
+        self.robot_free_at[list(team)] = start + self.instance.durations[task]
+        if self.robot_site is not None and self.instance.travel is not None:
+            self.robot_site[list(team)] = self.instance.travel.task_to[task]
 
     def next_event_time(self) -> float | None:
         running = self.task_status == TaskStatus.ASSIGNED
@@ -117,6 +134,7 @@ class State:
             task_start=self.task_start.copy(),
             task_team=list(self.task_team),
             step=self.step,
+            robot_site=None if self.robot_site is None else self.robot_site.copy(),
         )
 
 
@@ -178,6 +196,9 @@ def check_decision(state: State, decision: Decision, policy: str = "policy") -> 
                 raise PolicyError(f"{policy}: robot {inst.robots[r].id!r} given two tasks (Eq. 9)")
             used.add(r)
         idx = list(team)
+        if math.isinf(state.arrival(task, idx)):
+            raise PolicyError(f"{policy}: task {tid!r}: a fixed robot of {[inst.robots[r].id for r in team]} is at "
+                              "another site (travel extension)")
         if not covers(inst.robot_caps[idx], inst.robot_payload[idx], inst.task_caps[task], inst.tasks[task].payload):
             raise PolicyError(f"{policy}: subteam {[inst.robots[r].id for r in team]} does not cover task {tid!r} (Eqs. 10-11)")
 

@@ -12,11 +12,13 @@ import hashlib
 import json
 import math
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule
+from lvws_ros.core.travel import Travel, build_travel
 from lvws_ros.errors import InstanceError, LvwsError, ScheduleError
 
 __all__ = [
@@ -233,11 +235,47 @@ def instance_from_dict(data: Any) -> Instance:
                  for n, c in enumerate(_list(_require(data, "capabilities", "instance"), "capabilities")))
     robots = [_robot(r, f"robots[{n}]") for n, r in enumerate(_list(_require(data, "robots", "instance"), "robots"))]
     tasks = [_task(t, f"tasks[{n}]") for n, t in enumerate(_list(_require(data, "tasks", "instance"), "tasks"))]
-    return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks))
+    if "sites" not in data:  # no travel extension: zero travel, as in every file before it
+        return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks))
+    travel = _travel(data, robots, tasks)
+    robots = [replace(r, extra={k: v for k, v in r.extra.items() if k not in _ROBOT_TRAVEL_KEYS}) for r in robots]
+    tasks = [replace(t, extra={k: v for k, v in t.extra.items() if k not in _TASK_TRAVEL_KEYS}) for t in tasks]
+    return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks), travel=travel)
+
+
+_ROBOT_TRAVEL_KEYS = {"site", "speed"}
+_TASK_TRAVEL_KEYS = {"site", "from", "to"}
+
+
+def _travel(data: dict[str, Any], robots: list[Robot], tasks: list[Task]) -> Travel:
+    """The travel extension of an instance with ``sites`` (formats.md)."""
+    sites = _object(data["sites"], "sites")
+    distances = _object(data.get("distances", {}), "distances")
+    for a, row in distances.items():
+        _object(row, f"distances.{a}")
+    robot_sites = []
+    for n, r in enumerate(robots):
+        where = f"robots[{n}]"
+        site = _string(_require(r.extra, "site", f"{where} (the instance has sites)"), f"{where}.site", "a site name")
+        speed = r.extra.get("speed")
+        robot_sites.append((r.id, site, None if speed is None else _num(speed, f"{where}.speed")))
+    task_sites = []
+    for n, t in enumerate(tasks):
+        where = f"tasks[{n}]"
+        if "site" in t.extra:
+            site = _string(t.extra["site"], f"{where}.site", "a site name")
+            task_sites.append((t.id, site, site))
+        elif "from" in t.extra and "to" in t.extra:
+            task_sites.append((t.id, _string(t.extra["from"], f"{where}.from", "a site name"),
+                               _string(t.extra["to"], f"{where}.to", "a site name")))
+        else:
+            raise InstanceError(f"{where}: missing key 'site' (or 'from' and 'to'): the instance has sites "
+                                f"(task {t.id[:40]!r})")
+    return build_travel(sites, distances, robot_sites, task_sites)
 
 
 def instance_to_dict(inst: Instance) -> dict[str, Any]:
-    return {
+    out: dict[str, Any] = {
         "format": INSTANCE_FORMAT,
         "name": inst.name,
         "capabilities": list(inst.capabilities),
@@ -257,6 +295,21 @@ def instance_to_dict(inst: Instance) -> dict[str, Any]:
             for t in inst.tasks
         ],
     }
+    tr = inst.travel
+    if tr is not None:
+        out["sites"] = {s: list(xy) for s, xy in zip(tr.sites, tr.coordinates, strict=True)}
+        if tr.overrides:
+            out["distances"] = {}
+            for a, b, d in tr.overrides:
+                out["distances"].setdefault(a, {})[b] = d
+        for k, r in enumerate(out["robots"]):
+            r["site"] = tr.sites[tr.robot_site[k]]
+            if tr.robot_speed[k] > 0:
+                r["speed"] = tr.robot_speed[k]
+        for k, t in enumerate(out["tasks"]):
+            a, b = tr.sites[tr.task_from[k]], tr.sites[tr.task_to[k]]
+            t.update({"site": a} if a == b else {"from": a, "to": b})
+    return out
 
 
 def instance_key(inst: Instance) -> str:

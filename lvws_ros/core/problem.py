@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from lvws_ros.core.subteams import BoolArray, FloatArray, shortfall
+from lvws_ros.core.travel import Travel
 from lvws_ros.errors import InstanceError
 
 # Durations and payloads are at most this (formats.md, "Limits"): far above any real cell,
@@ -58,6 +59,7 @@ class Instance:
     capabilities: tuple[str, ...]
     robots: tuple[Robot, ...]
     tasks: tuple[Task, ...]
+    travel: Travel | None = None  # the travel extension (formats.md); None: zero travel
 
     def __post_init__(self) -> None:
         validate_instance(self)
@@ -216,6 +218,10 @@ def validate_instance(inst: Instance) -> None:
         raise InstanceError("robots: the team is empty")
     _no_duplicates([r.id for r in inst.robots], "robot")
     _no_duplicates([t.id for t in inst.tasks], "task")
+    tr = inst.travel
+    if tr is not None and (len(tr.robot_site) != len(inst.robots) or len(tr.task_from) != len(inst.tasks)):
+        raise InstanceError(f"travel: {len(tr.robot_site)} robot and {len(tr.task_from)} task sites for "
+                            f"{len(inst.robots)} robots and {len(inst.tasks)} tasks")
     for r in inst.robots:
         _check_vector(r.capabilities, k, f"robot {r.id!r} capabilities")
         _check_number(r.payload, f"robot {r.id!r} payload", positive=True)

@@ -1,4 +1,5 @@
-"""Schedules and the six validity rules of ``lvws-schedule/1`` (formats.md).
+"""Schedules and the validity rules of ``lvws-schedule/1`` (formats.md): the six of the
+contract, and rule 7 (travel) for instances with the travel extension.
 
 Reading and writing schedule files is :mod:`lvws_ros.core.formats`.
 """
@@ -85,8 +86,32 @@ def _rule1(inst: Instance, s: Schedule) -> list[Violation]:
     return v
 
 
+def _rule7(inst: Instance, per_robot: dict[str, list[Assignment]], tol: float) -> list[Violation]:
+    tr = inst.travel
+    assert tr is not None
+    v: list[Violation] = []
+    for rid, items in sorted(per_robot.items()):
+        if rid not in inst.robot_index:
+            continue
+        r = inst.robot_index[rid]
+        site, free, before = tr.robot_site[r], 0.0, "its start"
+        for a in items:  # sorted by start (rule 5)
+            if a.task not in inst.task_index:
+                continue
+            j = inst.task_index[a.task]
+            need = tr.time(r, site, tr.task_from[j])
+            if not a.start >= free + need - tol:
+                how = "cannot leave its site" if math.isinf(need) else f"needs {need:g} s"
+                v.append(Violation(7, f"robot {rid!r} {how} from {tr.sites[site]} ({before}) to "
+                                      f"{tr.sites[tr.task_from[j]]} for task {a.task!r}, which starts at {a.start:g}"
+                                      + ("" if math.isinf(need) else f" < {free + need:g}")))
+            site, free, before = tr.task_to[j], a.end, f"end of {a.task!r}"
+    return v
+
+
 def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[Violation]:
-    """Every violation of the six validity rules of formats.md (empty list: valid)."""
+    """Every violation of the validity rules of formats.md (empty list: valid): rules 1-6,
+    and rule 7 (travel) when the instance has the travel extension."""
     v = _rule1(inst, s)
     by_task = {a.task: a for a in s.assignments if a.task in inst.task_index}
     for a in by_task.values():
@@ -127,6 +152,11 @@ def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[
             if not y.start >= x.end - tol:
                 v.append(Violation(5, f"robot {r!r} is in {x.task!r} [{x.start:g}, {x.end:g}) "
                                       f"and {y.task!r} [{y.start:g}, {y.end:g}) at once"))
+    # Rule 7 (travel extension): a robot's first task starts no earlier than it can get
+    # there from its site, and each next one no earlier than the end of the one before plus
+    # the travel between them (a subteam starts when its slowest member can be there).
+    if inst.travel is not None:
+        v += _rule7(inst, per_robot, tol)
     # Rule 6: makespan is the largest end.
     latest = max((a.end for a in s.assignments), default=0.0)
     if not abs(s.makespan - latest) <= tol:

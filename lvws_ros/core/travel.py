@@ -1,0 +1,109 @@
+"""Travel between sites (the optional travel extension of ``lvws-instance/1``, formats.md).
+
+An instance with travel has named sites with coordinates (distances Euclidean, unless a
+``distances`` entry gives one for a pair); every robot a site (where it starts, or where it
+is fixed) and a speed (absent: fixed, it never leaves its site); every task a site (or a
+``from`` where its subteam meets and a ``to`` where the subteam is when it is done, for
+transports). Robot r needs ``distance(a, b) / speed_r`` seconds from a to b; a subteam
+starts when its slowest member can be there. An instance without travel means zero
+travel, exactly as before the extension.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from lvws_ros.core.subteams import FloatArray
+from lvws_ros.errors import InstanceError
+
+__all__ = ["Travel", "build_travel"]
+
+
+@dataclass(frozen=True, eq=False)
+class Travel:
+    sites: tuple[str, ...]
+    coordinates: tuple[tuple[float, float], ...]  # per site
+    distance: FloatArray  # (S, S)
+    overrides: tuple[tuple[str, str, float], ...]  # the file's `distances` entries (kept for writing)
+    robot_site: tuple[int, ...]  # (N,) start or fixed site
+    robot_speed: tuple[float, ...]  # (N,) > 0, or 0: fixed
+    task_from: tuple[int, ...]  # (M,) where the subteam meets
+    task_to: tuple[int, ...]  # (M,) where the subteam is when the task is done
+
+    def time(self, robot: int, a: int, b: int) -> float:
+        """Seconds robot ``robot`` needs from site a to site b (inf: a fixed robot elsewhere)."""
+        if a == b:
+            return 0.0
+        speed = self.robot_speed[robot]
+        return float(self.distance[a, b]) / speed if speed > 0 else math.inf
+
+    def arrival(self, team: Sequence[int], at: Sequence[int], task: int) -> float:
+        """Seconds until the last member of ``team`` (now at sites ``at``) reaches ``task``."""
+        return max((self.time(r, a, self.task_from[task]) for r, a in zip(team, at, strict=True)), default=0.0)
+
+    def key(self) -> tuple[object, ...]:
+        return (self.sites, self.coordinates, self.overrides, self.robot_site, self.robot_speed, self.task_from,
+                self.task_to)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Travel) and self.key() == other.key()
+
+    def __hash__(self) -> int:
+        return hash(self.key())
+
+
+def _finite(value: float, where: str, positive: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or (value <= 0 if positive else value < 0):
+        raise InstanceError(f"{where}: expected a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+    return float(value)
+
+
+def _coordinate(value: float, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InstanceError(f"{where}: expected a finite number, got {value!r}")
+    return float(value)
+
+
+def build_travel(sites: Mapping[str, Sequence[float]], distances: Mapping[str, Mapping[str, float]],
+                 robots: Sequence[tuple[str, str, float | None]],
+                 tasks: Sequence[tuple[str, str, str]]) -> Travel:
+    """A checked :class:`Travel`. ``robots``: (id, site, speed or None for fixed);
+    ``tasks``: (id, from site, to site). InstanceError names the item."""
+    names = tuple(sites)
+    if not names:
+        raise InstanceError("sites: at least one site is needed")
+    index = {s: k for k, s in enumerate(names)}
+    coords = []
+    for s in names:
+        xy = sites[s]
+        if not isinstance(xy, (list, tuple)) or len(xy) != 2:
+            raise InstanceError(f"sites.{s}: expected [x, y], got {xy!r}")
+        coords.append((_coordinate(xy[0], f"sites.{s}[0]"), _coordinate(xy[1], f"sites.{s}[1]")))
+    xy_arr = np.array(coords, dtype=np.float64).reshape(len(names), 2)
+    dist = np.sqrt(((xy_arr[:, None, :] - xy_arr[None, :, :]) ** 2).sum(axis=-1))
+    overrides = []
+    for a, row in distances.items():
+        for b, d in row.items():
+            if a not in index or b not in index:
+                raise InstanceError(f"distances.{a}.{b}: unknown site {a if a not in index else b!r}")
+            dist[index[a], index[b]] = _finite(d, f"distances.{a}.{b}", False)
+            overrides.append((a, b, float(d)))
+
+    def site(name: str, where: str) -> int:
+        if name not in index:
+            raise InstanceError(f"{where}: unknown site {name!r} (sites: {', '.join(names[:10])})")
+        return index[name]
+
+    robot_site, robot_speed = [], []
+    for rid, s, speed in robots:
+        robot_site.append(site(s, f"robot {rid!r} site"))
+        robot_speed.append(0.0 if speed is None else _finite(speed, f"robot {rid!r} speed", True))
+    task_from = [site(a, f"task {tid!r} site") for tid, a, _ in tasks]
+    task_to = [site(b, f"task {tid!r} site") for tid, _, b in tasks]
+    return Travel(names, tuple(coords), dist, tuple(overrides), tuple(robot_site), tuple(robot_speed),
+                  tuple(task_from), tuple(task_to))

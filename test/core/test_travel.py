@@ -1,0 +1,124 @@
+"""The travel extension of lvws-instance/1 (formats.md): files without it unchanged,
+files with it read, written and checked (rule 7), and the executor's robots that travel
+before a task starts (a subteam starts when its slowest member is there)."""
+
+from __future__ import annotations
+
+import copy
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import REPO
+from lvws_ros.core.executor import simulate
+from lvws_ros.core.formats import instance_from_dict, instance_key, instance_to_dict, load_instance, schedule_to_dict
+from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
+from lvws_ros.errors import InstanceError
+from lvws_ros.registry import make_policy
+
+CELL = {
+    "format": "lvws-instance/1",
+    "name": "travel-cell",
+    "capabilities": ["arm", "mobile"],
+    "sites": {"a": [0.0, 0.0], "b": [6.0, 8.0], "c": [12.0, 0.0]},
+    "distances": {"a": {"c": 20.0}},  # a wall in the way: longer than the straight line (12)
+    "robots": [
+        {"id": "arm_b", "capabilities": [1, 0], "payload": 1.0, "site": "b"},  # fixed at b
+        {"id": "fast", "capabilities": [0, 1], "payload": 3.0, "site": "a", "speed": 2.0},
+        {"id": "slow", "capabilities": [0, 1], "payload": 4.0, "site": "a", "speed": 1.0},
+    ],
+    "tasks": [
+        {"id": "carry", "capabilities": [0, 1], "payload": 6.0, "duration": 5.0, "after": [], "from": "a", "to": "b"},
+        {"id": "fit", "capabilities": [1, 0], "payload": 0.5, "duration": 3.0, "after": ["carry"], "site": "b"},
+        {"id": "fetch", "capabilities": [0, 1], "payload": 2.0, "duration": 2.0, "after": [], "site": "c"},
+    ],
+}
+
+
+def test_files_without_sites_are_read_and_written_exactly_as_before():
+    for path in [REPO / "config" / "example_instance.json", *sorted((REPO / "examples" / "my_cell").glob("*.json"))]:
+        data = json.loads(path.read_text())
+        inst = load_instance(path)
+        assert inst.travel is None
+        assert instance_to_dict(inst) == {**data, "robots": [{**r, "payload": float(r["payload"])} for r in data["robots"]],
+                                          "tasks": [{**t, "payload": float(t["payload"]), "duration": float(t["duration"]),
+                                                     "after": t.get("after", [])} for t in data["tasks"]]}
+
+
+def test_an_instance_with_sites_round_trips():
+    inst = instance_from_dict(CELL)
+    tr = inst.travel
+    assert tr is not None and tr.sites == ("a", "b", "c")
+    assert tr.time(1, 0, 1) == pytest.approx(5.0)  # |ab| = 10 at speed 2
+    assert tr.time(2, 0, 2) == pytest.approx(20.0)  # the distances entry, not 12
+    assert tr.time(0, 1, 0) == float("inf") and tr.time(0, 1, 1) == 0.0  # the fixed arm
+    again = instance_from_dict(instance_to_dict(inst))
+    assert again.travel == tr and instance_key(again) == instance_key(inst)
+    assert "site" not in inst.robots[0].extra and "from" not in inst.tasks[0].extra
+
+
+@pytest.mark.parametrize(("mutate", "words"), [
+    (lambda d: d["robots"][1].pop("site"), r"robots\[1\].*missing key 'site'"),
+    (lambda d: d["robots"][1].update(site="z"), "robot 'fast' site: unknown site 'z'"),
+    (lambda d: d["robots"][1].update(speed=0), "robot 'fast' speed: expected a finite number > 0"),
+    (lambda d: d["tasks"][2].pop("site"), r"tasks\[2\]: missing key 'site' \(or 'from' and 'to'\)"),
+    (lambda d: d["sites"].update(b=[1.0]), r"sites.b: expected \[x, y\]"),
+    (lambda d: d["distances"]["a"].update(q=1.0), "distances.a.q: unknown site 'q'"),
+    (lambda d: d.update(sites={}), "sites: at least one site"),
+])
+def test_bad_travel_data_is_refused_naming_the_item(mutate, words):
+    data = copy.deepcopy(CELL)
+    mutate(data)
+    with pytest.raises(InstanceError, match=words):
+        instance_from_dict(data)
+
+
+def test_a_schedule_that_ignores_travel_is_rejected_by_rule_7():
+    inst = instance_from_dict(CELL)
+    # fast + slow carry (meet at a, where both start), then the arm at b fits; fetch by fast after
+    b_to_c = 10.0 / 2.0  # |bc| = 10 at speed 2
+    ok = Schedule.from_assignments("travel-cell", "hand", [
+        Assignment("carry", ("fast", "slow"), 0.0, 5.0), Assignment("fit", ("arm_b",), 5.0, 8.0),
+        Assignment("fetch", ("fast",), 5.0 + b_to_c, 7.0 + b_to_c)])
+    assert check_schedule(inst, ok) == []
+    ignoring = Schedule.from_assignments("travel-cell", "hand", [
+        Assignment("carry", ("fast", "slow"), 0.0, 5.0), Assignment("fit", ("arm_b",), 5.0, 8.0),
+        Assignment("fetch", ("fast",), 5.0, 7.0)])
+    problems = check_schedule(inst, ignoring)
+    assert [p.rule for p in problems] == [7]
+    assert "robot 'fast' needs 5 s from b (end of 'carry') to c for task 'fetch'" in str(problems[0])
+    first = Schedule.from_assignments("travel-cell", "hand", [
+        Assignment("fetch", ("slow",), 0.0, 2.0), Assignment("carry", ("fast", "slow"), 22.0, 27.0),
+        Assignment("fit", ("arm_b",), 27.0, 30.0)])
+    problems = check_schedule(inst, first)  # slow needs 20 s from a to c (one way: the entry is a -> c)
+    assert [p.rule for p in problems] == [7] and "needs 20 s from a (its start) to c" in str(problems[0])
+    arm_away = Schedule.from_assignments("travel-cell", "hand", [
+        Assignment("carry", ("fast", "slow", "arm_b"), 0.0, 5.0), Assignment("fit", ("arm_b",), 5.0, 8.0),
+        Assignment("fetch", ("fast",), 10.0, 12.0)])
+    assert any("robot 'arm_b' cannot leave its site from b (its start) to a" in str(p)
+               for p in check_schedule(inst, arm_away))
+
+
+def test_lvws_check_names_rule_7_and_the_travel(tmp_path: Path):
+    inst_path, sched_path = tmp_path / "cell.json", tmp_path / "sched.json"
+    inst_path.write_text(json.dumps(CELL))
+    sched = Schedule.from_assignments("travel-cell", "hand", [
+        Assignment("carry", ("fast", "slow"), 0.0, 5.0), Assignment("fit", ("arm_b",), 5.0, 8.0),
+        Assignment("fetch", ("fast",), 5.0, 7.0)])
+    sched_path.write_text(json.dumps(schedule_to_dict(sched)))
+    out = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "check", str(inst_path), str(sched_path)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1 and "rule 7" in out.stdout + out.stderr, out
+
+
+@pytest.mark.parametrize("policy", ["grp", "rand", "rand_subteam"])
+def test_the_executor_makes_robots_travel_before_a_task_starts(policy):
+    inst = instance_from_dict(CELL)
+    run = simulate(inst, make_policy(policy, seed=1))
+    assert check_schedule(inst, run.schedule) == []  # rule 7 included
+    fetch = inst.task_index["fetch"]  # at c: no robot is there at any time before
+    (when,) = [step.time for step in run.steps if any(j == fetch for j, _ in step.decision.assignments)]
+    assert run.schedule.by_task()["fetch"].start - when >= 5.0 - 1e-9  # the fastest way to c takes 5 s (b->c)
