@@ -7,6 +7,10 @@
   requirements (ties: fewer robots, then lower robot indices).
 
 All are work-conserving: they start every ready task for which free robots suffice.
+With travel (the travel extension of formats.md), a robot that can never reach a task (a
+fixed robot elsewhere) is never picked for it, and GRP takes the subteam that can be
+there first (the smallest arrival of its slowest member), the lightest among those;
+without travel every arrival is 0 and the choices are the paper's.
 Subteams are inclusion-minimal (a superset only ties up more robots, the duration
 being the same) and built constructively (:mod:`lvws_ros.core.subteams`), never by
 enumerating subsets: any team size, polynomial time.
@@ -15,6 +19,7 @@ enumerating subsets: any team size, polynomial time.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from lvws_ros.core.executor import Decision, State
 from lvws_ros.core.problem import Instance
@@ -41,6 +46,18 @@ class _SequentialPolicy:
              need_payload: float) -> tuple[int, ...] | None:
         raise NotImplementedError
 
+    @staticmethod
+    def arrivals(state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
+        """Seconds each free robot needs to reach ``task`` (zeros without travel)."""
+        return np.array([state.arrival(task, [int(r)]) for r in free], dtype=np.float64)
+
+    def pick_reachable(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
+                       arrival: FloatArray) -> tuple[int, ...] | None:
+        """``pick`` among the robots that can reach the task at all."""
+        ok = np.flatnonzero(np.isfinite(arrival))
+        team = self.pick(caps[ok], payloads[ok], need_caps, need_payload) if len(ok) else None
+        return None if team is None else tuple(int(ok[i]) for i in team)
+
     def decide(self, state: State) -> Decision:
         inst = state.instance
         free = np.array(state.free_robots(), dtype=np.int64)
@@ -54,8 +71,12 @@ class _SequentialPolicy:
                 break
             if not possible[k]:
                 continue
-            team = self.pick(inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[task],
-                             inst.tasks[task].payload)
+            if inst.travel is None:  # the paper's choice, untouched
+                team = self.pick(inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[task],
+                                 inst.tasks[task].payload)
+            else:
+                team = self.pick_reachable(inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[task],
+                                           inst.tasks[task].payload, self.arrivals(state, free, int(task)))
             if team is None:
                 continue
             out.append((int(task), tuple(int(free[i]) for i in team)))
@@ -68,6 +89,17 @@ class _SequentialPolicy:
 
 class GreedyPayloadPolicy(_SequentialPolicy):
     name = "grp"
+
+    def pick_reachable(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
+                       arrival: FloatArray) -> tuple[int, ...] | None:
+        """The lightest subteam among the robots that are there soonest: robots arriving
+        within each distinct arrival time in turn, the first that can cover wins."""
+        for limit in np.unique(arrival[np.isfinite(arrival)]):
+            near = np.flatnonzero(arrival <= limit)
+            team = self.pick(caps[near], payloads[near], need_caps, need_payload)
+            if team is not None:
+                return tuple(int(near[i]) for i in team)
+        return None
 
     def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
              need_payload: float) -> tuple[int, ...] | None:

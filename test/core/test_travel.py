@@ -122,3 +122,17 @@ def test_the_executor_makes_robots_travel_before_a_task_starts(policy):
     fetch = inst.task_index["fetch"]  # at c: no robot is there at any time before
     (when,) = [step.time for step in run.steps if any(j == fetch for j, _ in step.decision.assignments)]
     assert run.schedule.by_task()["fetch"].start - when >= 5.0 - 1e-9  # the fastest way to c takes 5 s (b->c)
+
+
+def test_grp_takes_the_subteam_that_is_there_first():
+    data = copy.deepcopy(CELL)
+    data["robots"].append({"id": "far", "capabilities": [0, 1], "payload": 5.0, "site": "c", "speed": 1.0})
+    data["tasks"] = [{"id": "fetch", "capabilities": [0, 1], "payload": 2.0, "duration": 2.0, "after": [],
+                      "site": "c"}]
+    inst = instance_from_dict(data)
+    sched = simulate(inst, make_policy("grp")).schedule
+    assert sched.by_task()["fetch"].robots == ("far",) and sched.by_task()["fetch"].start == 0.0
+    no_travel = instance_from_dict({k: v for k, v in data.items() if k not in ("sites", "distances")}
+                                   | {"robots": [{k: v for k, v in r.items() if k not in ("site", "speed")}
+                                                 for r in data["robots"]]})
+    assert simulate(no_travel, make_policy("grp")).schedule.by_task()["fetch"].robots == ("fast",)  # the lightest
