@@ -6,6 +6,10 @@ Model (per remaining task j, start S_j):
   * per robot, an optional interval of length d_j at S_j present when the robot is in
     the chosen subteam, and a no-overlap constraint over those intervals;
   * precedence S_j >= S_i + d_i; makespan C >= S_j + d_j; minimise C;
+  * with travel (the travel extension of formats.md): per robot, a circuit over its
+    possible tasks and its start (per-robot successor literals, AddCircuit); a chosen arc
+    i -> j means S_j >= S_i + d_i + travel(to_i, from_j), the first task waits for the
+    travel from where the robot is (sequence-dependent set-up times, rounded up to ticks);
   * redundant cumulatives (robots in use, payload in use, holders of each capability in
     use), start windows from longest paths before/after each task, and a hint from the
     best heuristic schedule, which also bounds the horizon.
@@ -89,11 +93,15 @@ def heuristic_schedule(inst: Instance, state: State | None = None, seeds: int = 
 
 
 def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> Schedule:
-    """Start every task as early as its prerequisites and robots allow, keeping each
-    robot's task order. The makespan never grows and every start falls on time 0 (or
-    the state's time) or on some task's end, i.e. on a decision step of the executor."""
+    """Start every task as early as its prerequisites and robots allow (with travel: as
+    soon as its last member can be there), keeping each robot's task order. The makespan
+    never grows; without travel every start falls on time 0 (or the state's time) or on
+    some task's end, i.e. on a decision step of the executor."""
     t0 = state.time if state is not None else 0.0
     robot_free = state.robot_free_at.copy() if state is not None else np.zeros(inst.num_robots)
+    tr = inst.travel
+    site = None if tr is None else (state.robot_site.copy() if state is not None and state.robot_site is not None
+                                    else np.array(tr.robot_site, dtype=np.int64))
     end: dict[str, float] = {}
     fixed: set[str] = set()
     if state is not None:
@@ -104,10 +112,14 @@ def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> S
     for a in sorted((a for a in sched.assignments if a.task not in fixed), key=lambda a: (a.start, a.task)):
         j = inst.task_index[a.task]
         robots = [inst.robot_index[r] for r in a.robots]
-        start = max([t0, *(end[inst.tasks[p].id] for p in inst.prerequisites[j]), *(robot_free[r] for r in robots)])
+        ready = [robot_free[r] + (0.0 if tr is None or site is None else tr.time(r, int(site[r]), tr.task_from[j]))
+                 for r in robots]  # with travel: when each member can be there
+        start = max([t0, *(end[inst.tasks[p].id] for p in inst.prerequisites[j]), *ready])
         stop = start + inst.durations[j]
         end[a.task] = stop
         robot_free[robots] = stop
+        if tr is not None and site is not None:
+            site[robots] = tr.task_to[j]
         out.append(Assignment(a.task, a.robots, float(start), float(stop)))
     return Schedule.from_assignments(inst.name, sched.policy, out, sched.decisions, sched.compute_seconds)
 
@@ -133,6 +145,54 @@ class _Horizon:
         return round(x * self.scale)
 
 
+def _travel_times(inst: Instance) -> np.ndarray:
+    """Every finite travel time of the instance (empty without travel)."""
+    tr = inst.travel
+    if tr is None:
+        return np.zeros(0)
+    out = [tr.time(r, a, b) for r in range(inst.num_robots) for a in range(len(tr.sites)) for b in range(len(tr.sites))]
+    return np.array([t for t in out if np.isfinite(t)])
+
+
+def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon, start: dict[int, cp_model.IntVar],
+                member: dict[int, dict[int, cp_model.IntVar]]) -> None:
+    """Per robot, a circuit through its start (node 0) and the tasks it may do: its
+    successor literals carry the travel between consecutive tasks (rounded up to ticks,
+    so a schedule of the model is valid in real time)."""
+    tr = inst.travel
+    if tr is None:
+        return
+    site = state.robot_site if state.robot_site is not None else np.array(tr.robot_site, dtype=np.int64)
+
+    def up(seconds: float) -> int:
+        return int(np.ceil(seconds * h.scale - 1e-9))
+
+    for r in range(inst.num_robots):
+        tasks = [j for j in h.todo if r in member[j]]
+        if not tasks:
+            continue
+        node = {j: k + 1 for k, j in enumerate(tasks)}
+        arcs: list[tuple[int, int, Any]] = [(0, 0, model.new_bool_var(f"idle_{r}"))]
+        for j in tasks:
+            y = member[j][r]
+            arcs.append((node[j], node[j], y.Not()))
+            reach = tr.time(r, int(site[r]), tr.task_from[j])
+            if np.isinf(reach):  # a fixed robot elsewhere: never in this subteam
+                model.add(y == 0)
+                continue
+            first = model.new_bool_var(f"first_{r}_{j}")
+            arcs += [(0, node[j], first), (node[j], 0, model.new_bool_var(f"last_{r}_{j}"))]
+            model.add(start[j] >= h.free_at[r] + up(reach)).only_enforce_if(first)
+            for k in tasks:
+                move = tr.time(r, tr.task_to[j], tr.task_from[k])
+                if k == j or np.isinf(move):
+                    continue
+                lit = model.new_bool_var(f"next_{r}_{j}_{k}")
+                arcs.append((node[j], node[k], lit))
+                model.add(start[k] >= start[j] + h.dur[j] + up(move)).only_enforce_if(lit)
+        model.add_circuit(arcs)
+
+
 def _coalitions(inst: Instance, todo: list[int]) -> dict[int, list[tuple[int, ...]]] | None:
     """The minimal covering coalitions of each task when the team is small enough to list
     them (MAX_ENUMERATED robots, COALITION_LIMIT coalitions in all), else None: the
@@ -154,7 +214,9 @@ def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule, coal
     fixed_end = {j: float(state.task_start[j] + inst.durations[j]) for j in range(inst.num_tasks)
                  if status[j] in (TaskStatus.ASSIGNED, TaskStatus.DONE)}
     t0 = state.time
-    times = np.concatenate([inst.durations, state.robot_free_at, [t0], np.array(list(fixed_end.values()))])
+    travel_times = _travel_times(inst)
+    times = np.concatenate([inst.durations, state.robot_free_at, [t0], np.array(list(fixed_end.values())),
+                            travel_times])
     scale, exact_scale = _time_scale(times)
 
     def ticks(x: float) -> int:
@@ -183,7 +245,9 @@ def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule, coal
         if j in dur:
             tail[j] = dur[j] + max((tail[s] for s in inst.successors[j] if s in dur), default=0)
     lower = max([ticks(t0), *(head[j] + tail[j] for j in todo), *(ticks(e) for e in fixed_end.values())])
-    upper = max(ticks(hint.makespan), lower)
+    # travel rounded up to ticks adds less than a tick per move along any chain of tasks
+    slack = len(todo) + 1 if inst.travel is not None and not exact_scale else 0
+    upper = max(ticks(hint.makespan) + slack, lower)
     return _Horizon(todo, fixed_end, scale, exact_scale, dur, free_at, teams, head, tail, lower, upper)
 
 
@@ -368,6 +432,7 @@ def solve_exact(
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
     h = _horizon(inst, state, todo, hint, coalitions=formulation != "boolean")
     m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
+    _add_travel(m.model, inst, state, h, m.start, m.member)
     _add_hint(inst, h, m, hint)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))

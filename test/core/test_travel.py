@@ -136,3 +136,59 @@ def test_grp_takes_the_subteam_that_is_there_first():
                                    | {"robots": [{k: v for k, v in r.items() if k not in ("site", "speed")}
                                                  for r in data["robots"]]})
     assert simulate(no_travel, make_policy("grp")).schedule.by_task()["fetch"].robots == ("fast",)  # the lightest
+
+
+def _brute_force(inst) -> float:
+    """The optimal makespan by enumeration, independently of the solver: every task order
+    consistent with the DAG and every minimal covering subteam per task, each robot
+    starting a task once it is free and has travelled there (the serial schedule: some
+    order gives every robot's sequence of an optimal schedule, and starting as early as
+    possible never hurts)."""
+    import itertools
+
+    from lvws_ros.core.subteams import minimal_subteams
+
+    tr = inst.travel
+    teams = [minimal_subteams(inst.robot_caps, inst.robot_payload, inst.task_caps[j], inst.tasks[j].payload)
+             for j in range(inst.num_tasks)]
+    best = float("inf")
+    for order in itertools.permutations(range(inst.num_tasks)):
+        pos = {j: k for k, j in enumerate(order)}
+        if any(pos[p] > pos[j] for j in order for p in inst.prerequisites[j]):
+            continue
+        for choice in itertools.product(*(teams[j] for j in order)):
+            free = [0.0] * inst.num_robots
+            site = list(tr.robot_site)
+            end: dict[int, float] = {}
+            for j, team in zip(order, choice, strict=True):
+                start = max([0.0, *(end[p] for p in inst.prerequisites[j]),
+                             *(free[r] + tr.time(r, site[r], tr.task_from[j]) for r in team)])
+                end[j] = start + inst.durations[j]
+                for r in team:
+                    free[r], site[r] = end[j], tr.task_to[j]
+            best = min(best, max(end.values()))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_exact_expert_with_travel_equals_a_brute_force(seed):
+    import numpy as np
+
+    from lvws_ros.policies.exact import solve_exact
+
+    rng = np.random.default_rng(seed)
+    sites = {s: [float(rng.integers(0, 9)), float(rng.integers(0, 9))] for s in "abc"}
+    data = {"format": "lvws-instance/1", "name": f"tiny-{seed}", "capabilities": ["x", "y"], "sites": sites,
+            "distances": {a: {b: float(rng.integers(1, 7)) for b in "abc" if b != a} for a in "abc"},
+            "robots": [{"id": f"r{k}", "capabilities": [int(k % 2 == 0), int(k > 0)], "payload": float(1 + k),
+                        "site": "abc"[k % 3], "speed": float(rng.choice([0.5, 1.0, 2.0]))} for k in range(3)],
+            "tasks": []}
+    for j in range(4):
+        caps = [int(rng.integers(0, 2)), 1] if j % 2 else [1, int(rng.integers(0, 2))]
+        where = {"site": "abc"[int(rng.integers(0, 3))]} if j != 1 else {"from": "a", "to": "c"}
+        data["tasks"].append({"id": f"t{j}", "capabilities": caps, "payload": float(rng.integers(0, 4)),
+                              "duration": float(rng.integers(1, 5)), "after": ["t0"] if j == 3 else [], **where})
+    inst = instance_from_dict(data)
+    res = solve_exact(inst, workers=2, time_limit=20)
+    assert res.proven and check_schedule(inst, res.schedule) == []
+    assert res.makespan == pytest.approx(_brute_force(inst), abs=1e-6)
