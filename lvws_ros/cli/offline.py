@@ -255,8 +255,9 @@ def _add_train(add: Adder) -> None:
     p.add_argument("--choice-weight", type=float, default=1.0, help="per-robot choice term; 0: Eq. 12 alone")
     p.add_argument("--hidden", type=int, default=64)
     p.add_argument("--dbgm", action="store_true", help="the DBGM-style baseline: GAT only, no idle task")
-    p.add_argument("--wait-head", action=argparse.BooleanOptionalAction, default=True,
-                   help="learn voluntary waiting with a wait head (added to an --init model without one)")
+    p.add_argument("--wait-head", action=argparse.BooleanOptionalAction, default=False,
+                   help="learn voluntary waiting with a wait head (added to an --init model without one); off by "
+                        "default: it was break-even in our test (docs/wait_head_experiment.md)")
     p.add_argument("--wait-weight", type=float, default=1.0, help="weight of the wait head's term")
     p.add_argument("--dagger-rounds", type=int, default=2)
     p.add_argument("--dagger-instances", type=int, default=1500)
