@@ -27,8 +27,9 @@ def test_train_on_own_instances_then_fine_tune(tmp_path):
             "--label-time-limit", "2", "--processes", "1", "--quiet"]
     lvws("train", "--instances", MY_CELL, "--out", base, "--hidden", "16", *tiny)
     tuned = tmp_path / "tuned.pt"
-    res = lvws("train", "--instances", MY_CELL, "--init", base, "--out", tuned, *tiny)
+    res = lvws("train", "--instances", MY_CELL, "--init", base, "--out", tuned, "--wait-head", *tiny)
     assert f"fine-tuning {base}" in res.stdout
+    assert "a wait head added" in res.stdout and "wait threshold 0.5 -> suboptimality" in res.stdout
     for f in sorted(MY_CELL.glob("*.json"))[:2]:
         out = tmp_path / f"{f.stem}.sched.json"
         lvws("solve", f, "--policy", "lvws", "--model", tuned, "--out", out)
