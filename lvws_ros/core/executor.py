@@ -47,6 +47,10 @@ class State:
     # travel extension: the site each robot is at (or will be, when its task is done); None: no travel
     robot_site: npt.NDArray[np.int64] | None = None
 
+    def __post_init__(self) -> None:
+        if self.robot_site is None and self.instance.travel is not None:  # no sites given: where robots start
+            self.robot_site = np.array(self.instance.travel.robot_site, dtype=np.int64)
+
     @classmethod
     def initial(cls, inst: Instance) -> State:
         m = inst.num_tasks
@@ -57,7 +61,6 @@ class State:
             task_status=np.full(m, TaskStatus.QUEUED, dtype=np.int8),
             task_start=np.full(m, np.nan),
             task_team=[() for _ in range(m)],
-            robot_site=None if inst.travel is None else np.array(inst.travel.robot_site, dtype=np.int64),
         )
         state.refresh()
         return state

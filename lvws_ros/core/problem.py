@@ -222,6 +222,12 @@ def validate_instance(inst: Instance) -> None:
     if tr is not None and (len(tr.robot_site) != len(inst.robots) or len(tr.task_from) != len(inst.tasks)):
         raise InstanceError(f"travel: {len(tr.robot_site)} robot and {len(tr.task_from)} task sites for "
                             f"{len(inst.robots)} robots and {len(inst.tasks)} tasks")
+    if tr is not None:  # the limits of formats.md: finite travel times, exact to well below the tolerance
+        if not np.all(np.abs(np.array(tr.coordinates)) <= MAX_VALUE) or not np.all(tr.distance <= MAX_VALUE):
+            raise InstanceError(f"sites: coordinates and distances must be at most {MAX_VALUE:g}")
+        bad = [inst.robots[r].id for r, v in enumerate(tr.robot_speed) if v != 0 and not 1 / MAX_VALUE <= v <= MAX_VALUE]
+        if bad:
+            raise InstanceError(f"robot {bad[0]!r} speed: must be between {1 / MAX_VALUE:g} and {MAX_VALUE:g}")
     for r in inst.robots:
         _check_vector(r.capabilities, k, f"robot {r.id!r} capabilities")
         _check_number(r.payload, f"robot {r.id!r} payload", positive=True)

@@ -99,6 +99,10 @@ def _rule7(inst: Instance, per_robot: dict[str, list[Assignment]], tol: float) -
             if a.task not in inst.task_index:
                 continue
             j = inst.task_index[a.task]
+            if not tr.can_do(r, j):
+                v.append(Violation(7, f"robot {rid!r} is fixed at {tr.sites[tr.robot_site[r]]}: it cannot take "
+                                      f"task {a.task!r}, which moves its team from {tr.sites[tr.task_from[j]]} to "
+                                      f"{tr.sites[tr.task_to[j]]}"))
             need = tr.time(r, site, tr.task_from[j])
             if not a.start >= free + need - tol:
                 how = "cannot leave its site" if math.isinf(need) else f"needs {need:g} s"

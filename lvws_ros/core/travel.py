@@ -41,8 +41,15 @@ class Travel:
         speed = self.robot_speed[robot]
         return float(self.distance[a, b]) / speed if speed > 0 else math.inf
 
+    def can_do(self, robot: int, task: int) -> bool:
+        """A fixed robot cannot take a task that ends elsewhere (a transport moves its team)."""
+        return self.robot_speed[robot] > 0 or self.task_from[task] == self.task_to[task]
+
     def arrival(self, team: Sequence[int], at: Sequence[int], task: int) -> float:
-        """Seconds until the last member of ``team`` (now at sites ``at``) reaches ``task``."""
+        """Seconds until the last member of ``team`` (now at sites ``at``) reaches ``task``
+        (inf when a member can never do it: a fixed robot elsewhere or on a transport)."""
+        if not all(self.can_do(r, task) for r in team):
+            return math.inf
         return max((self.time(r, a, self.task_from[task]) for r, a in zip(team, at, strict=True)), default=0.0)
 
     def key(self) -> tuple[object, ...]:

@@ -9,7 +9,11 @@ Model (per remaining task j, start S_j):
   * with travel (the travel extension of formats.md): per robot, a circuit over its
     possible tasks and its start (per-robot successor literals, AddCircuit); a chosen arc
     i -> j means S_j >= S_i + d_i + travel(to_i, from_j), the first task waits for the
-    travel from where the robot is (sequence-dependent set-up times, rounded up to ticks);
+    travel from where the robot is (sequence-dependent set-up times, rounded up to ticks).
+    This is rule 7's model: each robot sets out as soon as it is free, before the task is
+    ready if that helps, and subteams are minimal ones. Proofs are about that model; the
+    executor sends a subteam off only at a decision step, and a superset subteam (a rider
+    on a transport) can pay with travel; both are left to a later model (issue #15);
   * redundant cumulatives (robots in use, payload in use, holders of each capability in
     use), start windows from longest paths before/after each task, and a hint from the
     best heuristic schedule, which also bounds the horizon.
@@ -49,7 +53,7 @@ from lvws_ros.core.subteams import (
     minimal_subteams,
     prune,
 )
-from lvws_ros.errors import ExpertError
+from lvws_ros.errors import ExpertError, PolicyError
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomSubteamPolicy
 
 SCALES = (1, 10, 100, 1000)
@@ -100,8 +104,8 @@ def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> S
     t0 = state.time if state is not None else 0.0
     robot_free = state.robot_free_at.copy() if state is not None else np.zeros(inst.num_robots)
     tr = inst.travel
-    site = None if tr is None else (state.robot_site.copy() if state is not None and state.robot_site is not None
-                                    else np.array(tr.robot_site, dtype=np.int64))
+    site = None if tr is None else (State.initial(inst) if state is None else state).robot_site
+    site = None if site is None else site.copy()
     end: dict[str, float] = {}
     fixed: set[str] = set()
     if state is not None:
@@ -145,13 +149,18 @@ class _Horizon:
         return round(x * self.scale)
 
 
-def _travel_times(inst: Instance) -> np.ndarray:
-    """Every finite travel time of the instance (empty without travel)."""
+def _travel_times(inst: Instance, state: State) -> np.ndarray:
+    """The travel times a schedule from ``state`` can use (empty without travel): from
+    where each robot is and from each task's end site, to each task's start site."""
     tr = inst.travel
-    if tr is None:
+    if tr is None or state.robot_site is None:
         return np.zeros(0)
-    out = [tr.time(r, a, b) for r in range(inst.num_robots) for a in range(len(tr.sites)) for b in range(len(tr.sites))]
-    return np.array([t for t in out if np.isfinite(t)])
+    starts = np.array(tr.task_from)
+    origins = np.unique(np.concatenate([state.robot_site, tr.task_to]))
+    speeds = np.unique([v for v in tr.robot_speed if v > 0])
+    if not len(speeds):
+        return np.zeros(0)
+    return (tr.distance[np.ix_(origins, np.unique(starts))][..., None] / speeds).reshape(-1)
 
 
 def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon, start: dict[int, cp_model.IntVar],
@@ -160,9 +169,9 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
     successor literals carry the travel between consecutive tasks (rounded up to ticks,
     so a schedule of the model is valid in real time)."""
     tr = inst.travel
-    if tr is None:
+    if tr is None or state.robot_site is None:
         return
-    site = state.robot_site if state.robot_site is not None else np.array(tr.robot_site, dtype=np.int64)
+    site = state.robot_site
 
     def up(seconds: float) -> int:
         return int(np.ceil(seconds * h.scale - 1e-9))
@@ -176,8 +185,8 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
         for j in tasks:
             y = member[j][r]
             arcs.append((node[j], node[j], y.Not()))
-            reach = tr.time(r, int(site[r]), tr.task_from[j])
-            if np.isinf(reach):  # a fixed robot elsewhere: never in this subteam
+            reach = tr.arrival([r], [int(site[r])], j)
+            if np.isinf(reach):  # a fixed robot elsewhere, or on a transport: never in this subteam
                 model.add(y == 0)
                 continue
             first = model.new_bool_var(f"first_{r}_{j}")
@@ -214,7 +223,7 @@ def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule, coal
     fixed_end = {j: float(state.task_start[j] + inst.durations[j]) for j in range(inst.num_tasks)
                  if status[j] in (TaskStatus.ASSIGNED, TaskStatus.DONE)}
     t0 = state.time
-    travel_times = _travel_times(inst)
+    travel_times = _travel_times(inst, state)
     times = np.concatenate([inst.durations, state.robot_free_at, [t0], np.array(list(fixed_end.values())),
                             travel_times])
     scale, exact_scale = _time_scale(times)
@@ -487,6 +496,10 @@ class ExactPolicy:
 
     def decide(self, state: State) -> Decision:
         inst = state.instance
+        if inst.travel is not None:
+            raise PolicyError("exact: a plan with travel cannot be followed step by step yet (its robots may set out "
+                              "before a task is ready, which the executor does not do); solve_exact gives the plan "
+                              "and its makespan")
         if self.result is not None and not self._expected(state.time):
             self.result = None  # the world deviated from the plan (online use): re-solve from here
         if self.result is None:

@@ -192,3 +192,31 @@ def test_the_exact_expert_with_travel_equals_a_brute_force(seed):
     res = solve_exact(inst, workers=2, time_limit=20)
     assert res.proven and check_schedule(inst, res.schedule) == []
     assert res.makespan == pytest.approx(_brute_force(inst), abs=1e-6)
+
+
+def test_travel_counts_in_the_content_key_and_fixed_robots_stay_put():
+    from lvws_ros.core.executor import Decision, State, check_decision
+    from lvws_ros.errors import PolicyError
+
+    inst = instance_from_dict(CELL)
+    plain = instance_from_dict({k: v for k, v in CELL.items() if k not in ("sites", "distances")})
+    assert instance_key(plain) != instance_key(inst)
+    state = State.initial(inst)
+    with pytest.raises(PolicyError, match="fixed robot"):  # the arm at b cannot carry from a to b
+        check_decision(state, Decision(((0, (0, 1, 2)),)))
+    moved = Schedule.from_assignments("travel-cell", "hand", [
+        Assignment("carry", ("fast", "slow", "arm_b"), 0.0, 5.0), Assignment("fit", ("arm_b",), 5.0, 8.0),
+        Assignment("fetch", ("fast",), 10.0, 12.0)])
+    assert any("fixed at b: it cannot take task 'carry'" in str(p) for p in check_schedule(inst, moved))
+
+
+def test_following_an_exact_plan_with_travel_is_refused_clearly():
+    from lvws_ros.errors import PolicyError
+    from lvws_ros.policies.exact import ExactPolicy, left_shift, solve_exact
+
+    inst = instance_from_dict(CELL)
+    res = solve_exact(inst, workers=2, time_limit=10)
+    assert res.schedule is not None and check_schedule(inst, res.schedule) == []
+    assert check_schedule(inst, left_shift(inst, res.schedule)) == []
+    with pytest.raises(PolicyError, match="a plan with travel cannot be followed step by step"):
+        simulate(inst, ExactPolicy(workers=2, time_limit=5))
