@@ -29,7 +29,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
@@ -44,6 +43,7 @@ from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES, make_policy
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main
+from lvws_ros.sim.config import read_yaml
 
 DESCRIPTION = (
     "LVWS scheduler node: subscribes to lvws/team_state and lvws/task_graph, publishes lvws/assignments "
@@ -128,12 +128,7 @@ def check_params_file(path: str | Path, node: str = "scheduler", namespace: str 
     winning (rcl's matching of a node's fully qualified name): ``/**``, ``/**/<node>``,
     ``<node>`` and ``/<node>`` (root namespace), ``<namespace>/<node>``."""
     p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read the parameter file: {exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: malformed YAML: {exc}") from None
+    data = read_yaml(p, "parameter file")
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping of node names to ros__parameters")
     ns = namespace.rstrip("/")

@@ -13,10 +13,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.ros.convert import cell_task_to_msg
+from lvws_ros.sim.config import read_yaml
 
 __all__ = ["SERVICES", "call_world", "tasks_from_file"]
 
@@ -27,12 +26,7 @@ def tasks_from_file(path: str | Path) -> list[dict[str, Any]]:
     """Task entries (like config/assembly_cell.yaml's ``tasks``) from a YAML file: a list,
     or a mapping with a ``tasks`` list."""
     p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read the task file: {exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: malformed YAML: {exc}") from None
+    data = read_yaml(p, "task file")
     items = data.get("tasks") if isinstance(data, dict) else data
     if not isinstance(items, list) or not items or not all(isinstance(t, dict) for t in items):
         raise ConfigError(f"{p}: expected a non-empty list of task entries (or a mapping with a 'tasks' list)")

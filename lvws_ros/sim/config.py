@@ -17,7 +17,7 @@ import yaml
 from lvws_ros.errors import ConfigError
 
 __all__ = ["ARM_KINDS", "MOBILE_KINDS", "PART_PAYLOAD", "CellConfig", "CellSpec", "ObjectSpec", "RobotSpec", "TaskSpec",
-           "load_cell_config", "parse_task"]
+           "load_cell_config", "parse_task", "read_yaml"]
 
 ARM_KINDS = ("panda",)
 PART_PAYLOAD = 0.1  # an assembly's part when its entry names none
@@ -92,16 +92,25 @@ def _xy(value: Any, what: str) -> tuple[float, float]:
     return (float(value[0]), float(value[1]))
 
 
+def read_yaml(path: str | Path, what: str) -> Any:
+    """The data of a YAML file (``safe_load``: a file never runs code); ConfigError naming
+    the file when it is missing, unreadable or malformed. ``what`` names the kind of file."""
+    p = Path(path)
+    try:
+        return yaml.safe_load(p.read_text())
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the {what}: {exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: malformed YAML: {exc}") from None
+
+
 def load_cell_config(path: str | Path) -> CellConfig:
     """Read and check an assembly-cell YAML file (the shipped case study:
     :func:`lvws_ros.ros.resources.case_study_config`)."""
     p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: no such file") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: malformed YAML: {exc}") from None
+    if not p.exists():
+        raise ConfigError(f"{p}: no such file")
+    data = read_yaml(p, "cell configuration")
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level")
     try:

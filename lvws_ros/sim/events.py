@@ -22,9 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from lvws_ros.errors import ConfigError
+from lvws_ros.sim.config import read_yaml
 from lvws_ros.sim.world import CellSim, Event
 
 __all__ = ["KINDS", "WorldEvent", "apply_event", "load_events", "may_unblock", "stuck_reason"]
@@ -65,12 +64,7 @@ def _event(k: int, item: Any) -> WorldEvent:
 def load_events(path: str | Path) -> list[WorldEvent]:
     """The events of a file, in time order (stable for equal times)."""
     p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read the events file: {exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: malformed YAML: {exc}") from None
+    data = read_yaml(p, "events file")
     items = data.get("events") if isinstance(data, dict) else data
     if not isinstance(items, list):
         raise ConfigError(f"{p}: expected a list of events (or a mapping with an 'events' list)")
