@@ -6,14 +6,15 @@ Model (per remaining task j, start S_j):
   * per robot, an optional interval of length d_j at S_j present when the robot is in
     the chosen subteam, and a no-overlap constraint over those intervals;
   * precedence S_j >= S_i + d_i; makespan C >= S_j + d_j; minimise C;
-  * with travel (the travel extension of formats.md): per robot, a circuit over its
-    possible tasks and its start (per-robot successor literals, AddCircuit); a chosen arc
-    i -> j means S_j >= S_i + d_i + travel(to_i, from_j), the first task waits for the
-    travel from where the robot is (sequence-dependent set-up times, rounded up to ticks).
-    This is rule 7's model: each robot sets out as soon as it is free, before the task is
-    ready if that helps, and subteams are minimal ones. Proofs are about that model; the
-    executor sends a subteam off only at a decision step, and a superset subteam (a rider
-    on a transport) can pay with travel; both are left to a later model (issue #15);
+  * with travel (the travel extension of formats.md), the executor's model: a task's
+    subteam sets out together at its departure D_j, once the task is ready and every
+    member is free, and the task starts when the last member is there; per robot, a
+    circuit over its possible tasks and its start (per-robot successor literals,
+    AddCircuit), a chosen arc i -> j meaning D_j >= S_i + d_i and S_j >= D_j +
+    travel(to_i, from_j) (sequence-dependent set-up times, rounded up to ticks). Proofs
+    are about this model over minimal subteams: rule 7 also accepts schedules where robots
+    set out before a task is ready, and a superset subteam (a rider on a transport) can
+    pay with travel; neither is modelled (issue #15);
   * redundant cumulatives (robots in use, payload in use, holders of each capability in
     use), start windows from longest paths before/after each task, and a hint from the
     best heuristic schedule, which also bounds the horizon.
@@ -53,7 +54,7 @@ from lvws_ros.core.subteams import (
     minimal_subteams,
     prune,
 )
-from lvws_ros.errors import ExpertError, PolicyError
+from lvws_ros.errors import ExpertError
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomSubteamPolicy
 
 SCALES = (1, 10, 100, 1000)
@@ -97,10 +98,21 @@ def heuristic_schedule(inst: Instance, state: State | None = None, seeds: int = 
 
 
 def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> Schedule:
-    """Start every task as early as its prerequisites and robots allow (with travel: as
-    soon as its last member can be there), keeping each robot's task order. The makespan
-    never grows; without travel every start falls on time 0 (or the state's time) or on
-    some task's end, i.e. on a decision step of the executor."""
+    """Start every task as early as its prerequisites and robots allow, keeping each
+    robot's task order. The makespan never grows. Without travel every start falls on
+    time 0 (or the state's time) or on some task's end, i.e. on a decision step of the
+    executor; with travel, the subteam sets out at such a step, as the executor does,
+    and the task starts when its last member is there (:func:`departures`)."""
+    return _shift(inst, sched, state)[0]
+
+
+def departures(inst: Instance, sched: Schedule, state: State | None = None) -> dict[str, float]:
+    """When each task's subteam sets out in the left-shifted schedule (its start, without
+    travel): the decision step at which the executor must assign it."""
+    return _shift(inst, sched, state)[1]
+
+
+def _shift(inst: Instance, sched: Schedule, state: State | None) -> tuple[Schedule, dict[str, float]]:
     t0 = state.time if state is not None else 0.0
     robot_free = state.robot_free_at.copy() if state is not None else np.zeros(inst.num_robots)
     tr = inst.travel
@@ -113,19 +125,21 @@ def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> S
             end[inst.tasks[k].id] = float(state.task_start[k] + inst.durations[k])
             fixed.add(inst.tasks[k].id)
     out = [a for a in sched.assignments if a.task in fixed]
+    leave: dict[str, float] = {}
     for a in sorted((a for a in sched.assignments if a.task not in fixed), key=lambda a: (a.start, a.task)):
         j = inst.task_index[a.task]
         robots = [inst.robot_index[r] for r in a.robots]
-        ready = [robot_free[r] + (0.0 if tr is None or site is None else tr.time(r, int(site[r]), tr.task_from[j]))
-                 for r in robots]  # with travel: when each member can be there
-        start = max([t0, *(end[inst.tasks[p].id] for p in inst.prerequisites[j]), *ready])
+        depart = max([t0, *(end[inst.tasks[p].id] for p in inst.prerequisites[j]), *(robot_free[r] for r in robots)])
+        start = depart
+        if tr is not None and site is not None:  # the executor's travel: all set out now, the last one arrives
+            start += tr.arrival(robots, [int(site[r]) for r in robots], j)
+            site[robots] = tr.task_to[j]
         stop = start + inst.durations[j]
         end[a.task] = stop
         robot_free[robots] = stop
-        if tr is not None and site is not None:
-            site[robots] = tr.task_to[j]
+        leave[a.task] = float(depart)
         out.append(Assignment(a.task, a.robots, float(start), float(stop)))
-    return Schedule.from_assignments(inst.name, sched.policy, out, sched.decisions, sched.compute_seconds)
+    return Schedule.from_assignments(inst.name, sched.policy, out, sched.decisions, sched.compute_seconds), leave
 
 
 @dataclass
@@ -165,7 +179,9 @@ def _travel_times(inst: Instance, state: State) -> np.ndarray:
 
 def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon, start: dict[int, cp_model.IntVar],
                 member: dict[int, dict[int, cp_model.IntVar]]) -> None:
-    """Per robot, a circuit through its start (node 0) and the tasks it may do: its
+    """The executor's travel. Each task has a departure D_j: its subteam sets out once the
+    task is ready and every member is free, and the task starts when the last member is
+    there. Per robot, a circuit through its start (node 0) and the tasks it may do; its
     successor literals carry the travel between consecutive tasks (rounded up to ticks,
     so a schedule of the model is valid in real time)."""
     tr = inst.travel
@@ -176,6 +192,12 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
     def up(seconds: float) -> int:
         return int(np.ceil(seconds * h.scale - 1e-9))
 
+    now = h.ticks(state.time)
+    depart = {j: model.new_int_var(now, h.upper, f"D_{j}") for j in h.todo}
+    for j in h.todo:
+        model.add(start[j] >= depart[j])
+        for p in inst.prerequisites[j]:  # ready when it sets out
+            model.add(depart[j] >= (start[p] + h.dur[p] if p in h.dur else h.ticks(h.fixed_end[p])))
     for r in range(inst.num_robots):
         tasks = [j for j in h.todo if r in member[j]]
         if not tasks:
@@ -191,14 +213,16 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
                 continue
             first = model.new_bool_var(f"first_{r}_{j}")
             arcs += [(0, node[j], first), (node[j], 0, model.new_bool_var(f"last_{r}_{j}"))]
-            model.add(start[j] >= h.free_at[r] + up(reach)).only_enforce_if(first)
+            model.add(depart[j] >= h.free_at[r]).only_enforce_if(first)
+            model.add(start[j] >= depart[j] + up(reach)).only_enforce_if(first)
             for k in tasks:
                 move = tr.time(r, tr.task_to[j], tr.task_from[k])
                 if k == j or np.isinf(move):
                     continue
                 lit = model.new_bool_var(f"next_{r}_{j}_{k}")
                 arcs.append((node[j], node[k], lit))
-                model.add(start[k] >= start[j] + h.dur[j] + up(move)).only_enforce_if(lit)
+                model.add(depart[k] >= start[j] + h.dur[j]).only_enforce_if(lit)
+                model.add(start[k] >= depart[k] + up(move)).only_enforce_if(lit)
         model.add_circuit(arcs)
 
 
@@ -485,32 +509,32 @@ class ExactPolicy:
         self.seed = seed
         self.result: ExpertResult | None = None
         self._plan: dict[int, Assignment] = {}
+        self._leave: dict[str, float] = {}  # when each planned subteam sets out
 
     def reset(self, instance: Instance) -> None:
         self.result = None
         self._plan = {}
+        self._leave = {}
 
     def _expected(self, t: float) -> bool:
-        """Whether ``t`` is a start or end time of the plan (always so in the executor)."""
-        return any(abs(a.start - t) <= TOLERANCE or abs(a.end - t) <= TOLERANCE for a in self._plan.values())
+        """Whether ``t`` is a departure or end time of the plan (always so in the executor)."""
+        return any(abs(self._leave.get(a.task, a.start) - t) <= TOLERANCE or abs(a.end - t) <= TOLERANCE
+                   for a in self._plan.values())
 
     def decide(self, state: State) -> Decision:
         inst = state.instance
-        if inst.travel is not None:
-            raise PolicyError("exact: a plan with travel cannot be followed step by step yet (its robots may set out "
-                              "before a task is ready, which the executor does not do); solve_exact gives the plan "
-                              "and its makespan")
         if self.result is not None and not self._expected(state.time):
             self.result = None  # the world deviated from the plan (online use): re-solve from here
         if self.result is None:
             self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed)
             assert self.result.schedule is not None
             self._plan = {inst.task_index[a.task]: a for a in self.result.schedule.assignments}
+            self._leave = departures(inst, self.result.schedule, state)  # = starts without travel
         free = set(state.free_robots())
         out = []
         for j in state.ready_tasks():
             a = self._plan.get(j)
-            if a is None or abs(a.start - state.time) > TOLERANCE:
+            if a is None or abs(self._leave.get(a.task, a.start) - state.time) > TOLERANCE:
                 continue
             team = tuple(inst.robot_index[r] for r in a.robots)
             if set(team) <= free:

@@ -139,10 +139,11 @@ def test_grp_takes_the_subteam_that_is_there_first():
 
 
 def _brute_force(inst) -> float:
-    """The optimal makespan by enumeration, independently of the solver: every task order
-    consistent with the DAG and every minimal covering subteam per task, each robot
-    starting a task once it is free and has travelled there (the serial schedule: some
-    order gives every robot's sequence of an optimal schedule, and starting as early as
+    """The optimal makespan by enumeration, independently of the solver, in the
+    executor's model: every task order consistent with the DAG and every minimal covering
+    subteam per task; a subteam sets out once the task is ready and all its members are
+    free, and the task starts when the last one is there (the serial schedule: some order
+    gives every robot's sequence of an optimal schedule, and setting out as early as
     possible never hurts)."""
     import itertools
 
@@ -161,8 +162,8 @@ def _brute_force(inst) -> float:
             site = list(tr.robot_site)
             end: dict[int, float] = {}
             for j, team in zip(order, choice, strict=True):
-                start = max([0.0, *(end[p] for p in inst.prerequisites[j]),
-                             *(free[r] + tr.time(r, site[r], tr.task_from[j]) for r in team)])
+                depart = max([0.0, *(end[p] for p in inst.prerequisites[j]), *(free[r] for r in team)])
+                start = depart + max(tr.time(r, site[r], tr.task_from[j]) for r in team)
                 end[j] = start + inst.durations[j]
                 for r in team:
                     free[r], site[r] = end[j], tr.task_to[j]
@@ -174,7 +175,7 @@ def _brute_force(inst) -> float:
 def test_the_exact_expert_with_travel_equals_a_brute_force(seed):
     import numpy as np
 
-    from lvws_ros.policies.exact import solve_exact
+    from lvws_ros.policies.exact import ExactPolicy, solve_exact
 
     rng = np.random.default_rng(seed)
     sites = {s: [float(rng.integers(0, 9)), float(rng.integers(0, 9))] for s in "abc"}
@@ -192,6 +193,8 @@ def test_the_exact_expert_with_travel_equals_a_brute_force(seed):
     res = solve_exact(inst, workers=2, time_limit=20)
     assert res.proven and check_schedule(inst, res.schedule) == []
     assert res.makespan == pytest.approx(_brute_force(inst), abs=1e-6)
+    followed = simulate(inst, ExactPolicy(workers=2, time_limit=20)).schedule  # the executor can follow the plan
+    assert followed.makespan == pytest.approx(res.makespan, abs=1e-6) and check_schedule(inst, followed) == []
 
 
 def test_travel_counts_in_the_content_key_and_fixed_robots_stay_put():
@@ -210,13 +213,16 @@ def test_travel_counts_in_the_content_key_and_fixed_robots_stay_put():
     assert any("fixed at b: it cannot take task 'carry'" in str(p) for p in check_schedule(inst, moved))
 
 
-def test_following_an_exact_plan_with_travel_is_refused_clearly():
-    from lvws_ros.errors import PolicyError
-    from lvws_ros.policies.exact import ExactPolicy, left_shift, solve_exact
+def test_the_exact_plan_with_travel_is_followed_step_by_step_by_the_executor():
+    from lvws_ros.policies.exact import ExactPolicy, departures, left_shift, solve_exact
 
     inst = instance_from_dict(CELL)
     res = solve_exact(inst, workers=2, time_limit=10)
-    assert res.schedule is not None and check_schedule(inst, res.schedule) == []
-    assert check_schedule(inst, left_shift(inst, res.schedule)) == []
-    with pytest.raises(PolicyError, match="a plan with travel cannot be followed step by step"):
-        simulate(inst, ExactPolicy(workers=2, time_limit=5))
+    assert res.proven and res.schedule is not None and check_schedule(inst, res.schedule) == []
+    assert left_shift(inst, res.schedule).assignments == res.schedule.assignments
+    leave = departures(inst, res.schedule)
+    assert leave["fetch"] < res.schedule.by_task()["fetch"].start  # it sets out, then travels
+    run = simulate(inst, ExactPolicy(workers=2, time_limit=10))
+    assert run.schedule.makespan == pytest.approx(res.makespan) and check_schedule(inst, run.schedule) == []
+    grp = simulate(inst, make_policy("grp")).schedule
+    assert res.makespan <= grp.makespan + 1e-9
