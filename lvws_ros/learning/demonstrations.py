@@ -42,7 +42,7 @@ from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import ModelError
 from lvws_ros.learning.features import GraphFeatures, InstanceFeatures
 from lvws_ros.learning.loss import Demo, feasibility_mask
-from lvws_ros.policies.exact import ExactPolicy, solve_exact
+from lvws_ros.policies.exact import ExactPolicy, departures, solve_exact
 
 GAMMA = 0.9
 
@@ -61,14 +61,17 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA) -> tuple
     free = state.robot_available()
     assigned: set[int] = set()
     next_end = np.full(n, np.inf)
+    # the expert assigns a task at its departure: its start, or (travel) when its subteam sets out
+    leave = departures(inst, schedule, state) if inst.travel is not None else {}
     for a in schedule.assignments:
         j = inst.task_index[a.task]
         robots = [inst.robot_index[r] for r in a.robots]
-        if abs(a.start - t) <= TOLERANCE and np.isnan(state.task_start[j]):
+        assign_at = leave.get(a.task, a.start)
+        if abs(assign_at - t) <= TOLERANCE and np.isnan(state.task_start[j]):
             for r in robots:
                 e[r, j] = gamma ** steps_until(a.end)
                 assigned.add(r)
-        elif a.start > t + TOLERANCE:
+        elif assign_at > t + TOLERANCE:
             for r in robots:
                 next_end[r] = min(next_end[r], a.end)
     makespan = max(ends) if ends else t

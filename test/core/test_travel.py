@@ -226,3 +226,17 @@ def test_the_exact_plan_with_travel_is_followed_step_by_step_by_the_executor():
     assert run.schedule.makespan == pytest.approx(res.makespan) and check_schedule(inst, run.schedule) == []
     grp = simulate(inst, make_policy("grp")).schedule
     assert res.makespan <= grp.makespan + 1e-9
+
+
+def test_expert_demonstrations_on_a_travel_instance_label_the_departures():
+    from lvws_ros.learning.demonstrations import expert_demos
+
+    inst = instance_from_dict(CELL)
+    demos = expert_demos(inst, time_limit=10, workers=2)
+    fetch = inst.task_index["fetch"]  # at c: its robot sets out before the task starts
+    chosen = []
+    for d in demos:
+        tasks = list(d.features.task_ids[d.features.cols[:-1]])
+        if fetch in tasks:
+            chosen.append(bool((d.expert[:, tasks.index(fetch)] > 0).any()))
+    assert any(chosen), "the expert's departure to fetch is labelled at no decision step"
