@@ -72,3 +72,17 @@ def features_at(seed: int, n: int, m: int, step: int = 1) -> GraphFeatures:
     state = run.steps[min(step, len(run.steps) - 1)].state
     assert state is not None
     return encode_state(state)
+
+
+# Scripted world events for the case study (lvws_ros/sim/events.py), out of time order on
+# purpose: a file's order never matters, events are sorted by time.
+EVENTS = """
+events:
+  - {at: 8.0, fail: jackal_2}
+  - {at: 30.0, repair: jackal_2}
+  - {at: 2.0, cancel: t12}
+  - at: 20.0
+    submit:
+      - {id: t15, type: transport, object: obj3, from: cell_3, to: cell_1, after: [t05]}
+      - {id: t16, type: assembly, object: obj3, cell: cell_1, duration: 4.0, after: [t15]}
+"""

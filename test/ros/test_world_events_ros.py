@@ -16,19 +16,10 @@ import pytest
 from lvws_ros.cli.report import report, verify
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import LaunchError
+from samples import EVENTS
 
 pytestmark = pytest.mark.ros
 
-EVENTS = """
-events:
-  - {at: 2.0, cancel: t12}
-  - {at: 8.0, fail: jackal_2}
-  - at: 20.0
-    submit:
-      - {id: t15, type: transport, object: obj3, from: cell_3, to: cell_1, after: [t05]}
-      - {id: t16, type: assembly, object: obj3, cell: cell_1, duration: 4.0, after: [t15]}
-  - {at: 30.0, repair: jackal_2}
-"""
 
 
 def test_scripted_events_complete_and_the_bag_holds_the_final_task_set(tmp_path: Path):

@@ -17,17 +17,7 @@ from lvws_ros.sim.config import load_cell_config
 from lvws_ros.sim.events import WorldEvent, load_events
 from lvws_ros.sim.runner import run_offline
 from lvws_ros.sim.world import ASSIGNED, DONE, FLOOR, QUEUED, READY, CellSim
-
-EVENTS = """
-events:
-  - {at: 8.0, fail: jackal_2}
-  - {at: 30.0, repair: jackal_2}
-  - {at: 2.0, cancel: t12}
-  - at: 20.0
-    submit:
-      - {id: t15, type: transport, object: obj3, from: cell_3, to: cell_1, after: [t05]}
-      - {id: t16, type: assembly, object: obj3, cell: cell_1, duration: 4.0, after: [t15]}
-"""
+from samples import EVENTS
 
 
 @pytest.fixture
