@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from lvws_ros.core.datasets import DATASETS
 from lvws_ros.core.families import TRAINING_FAMILIES
 from lvws_ros.core.formats import dumps, load_instance
 from lvws_ros.core.problem import Instance
@@ -157,9 +158,10 @@ def cmd_train(args: argparse.Namespace) -> int:
                             choice_weight=args.choice_weight, seed=args.seed, dbgm=args.dbgm,
                             wait_weight=args.wait_weight, model=model_cfg)
     datasets = tuple(d for d in args.datasets.split(",") if d)
-    unknown = [d for d in datasets if d not in ("I", "II")]
+    trainable = [k for k, spec in DATASETS.items() if spec.train]
+    unknown = [d for d in datasets if d not in trainable]
     if unknown:
-        raise ConfigError(f"--datasets: {unknown} have no training split (choose from I, II)")
+        raise ConfigError(f"--datasets: {unknown} have no training split (choose from {', '.join(trainable)})")
     families = tuple((k, args.family_count) for k in args.families.split(",") if k)
     bad = [k for k, _ in families if k not in TRAINING_FAMILIES]
     if bad:
@@ -182,7 +184,7 @@ Adder = Any  # (name, function, help) -> argparse.ArgumentParser
 
 def add_parsers(add: Adder) -> None:
     p = add("generate", cmd_generate, "write one of the paper's datasets as lvws-instance/1 files")
-    p.add_argument("--dataset", choices=["I", "II", "III"], required=True)
+    p.add_argument("--dataset", choices=list(DATASETS), required=True)
     p.add_argument("--out", required=True, help="output folder (train/ and test/ inside)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--count", type=int, default=None, help="only the first COUNT instances")

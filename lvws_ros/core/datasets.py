@@ -26,6 +26,8 @@ import numpy as np
 
 from lvws_ros.core.formats import dumps, save_instance
 from lvws_ros.core.problem import Instance, Robot, Task
+from lvws_ros.core.subteams import covers
+from lvws_ros.core.travel import build_travel
 
 TASK_PAYLOAD_MEAN = 10.0
 PAYLOAD_RANGE = (1, 30)
@@ -43,12 +45,15 @@ class DatasetSpec:
     robots: tuple[int, int]
     tasks: tuple[int, int]
     description: str
+    travel: bool = False  # Dataset IV: :func:`travel_instance`
 
 
 DATASETS = {
     "I": DatasetSpec("I", 1, 1000, 800, (6, 6), (18, 18), "6 robots, 18 tasks (6r-18t)"),
     "II": DatasetSpec("II", 2, 10000, 8000, (3, 8), (8, 20), "3-8 robots, 8-20 tasks (8r-20t-var)"),
     "III": DatasetSpec("III", 3, 20, 0, (6, 6), (100, 100), "6 robots, 100 tasks (6r-100t)"),
+    "IV": DatasetSpec("IV", 4, 2200, 2000, (3, 6), (6, 12), "3-6 robots, 6-12 tasks, 3-5 sites, travel (ours)",
+                      travel=True),
 }
 
 
@@ -115,11 +120,66 @@ def subteam_heavy_instance(rng: np.random.Generator, num_robots: int, num_tasks:
                     robots, tuple(tasks))
 
 
+SITE_COUNT = (3, 5)
+SITE_GRID = 6  # site coordinates: integers in 0..SITE_GRID
+ROBOT_SPEEDS = (0.5, 1.0)  # mobile robots; integer distances / these speeds are integer travel times
+FIXED_SHARE = 1 / 3  # robots fixed at a site (arms)
+TRANSPORT_SHARE = 0.25  # tasks whose subteam ends at another site
+
+
+def travel_instance(rng: np.random.Generator, num_robots: int, num_tasks: int, name: str) -> Instance:
+    """Dataset IV (ours; the travel extension of formats.md): the paper's recipe for robots,
+    payloads, durations and prerequisites, plus 3-5 sites at distinct integer points of a
+    0..6 grid with Manhattan distances (aisles; integer, so integer travel times and exact
+    proofs); a third of the robots fixed at a random site (arms), the rest mobile at speed
+    0.5 or 1 starting at a random site; a quarter of the tasks transports (from one site to
+    another, so only mobile robots can do them), the rest at one site. Each task is drawn
+    again until the robots that can reach it cover it (Eqs. 10-11), so every instance is
+    feasible; mobile robots hold every capability between them."""
+    k = int(rng.integers(2, 4))
+    num_sites = int(rng.integers(SITE_COUNT[0], SITE_COUNT[1] + 1))
+    cells = rng.choice((SITE_GRID + 1) ** 2, size=num_sites, replace=False)
+    coords = {f"s{i}": [int(c) // (SITE_GRID + 1), int(c) % (SITE_GRID + 1)] for i, c in enumerate(cells)}
+    names = list(coords)
+    distances = {a: {b: float(abs(coords[a][0] - coords[b][0]) + abs(coords[a][1] - coords[b][1]))
+                     for b in names if b != a} for a in names}
+    while True:
+        caps = np.array([_nonzero_vector(rng, k) for _ in range(num_robots)], dtype=bool)
+        fixed = rng.random(num_robots) < FIXED_SHARE
+        fixed[: min(2, num_robots)] = False  # at least two mobile robots
+        if caps[~fixed].any(axis=0).all():
+            break
+    payloads = rng.integers(PAYLOAD_RANGE[0], PAYLOAD_RANGE[1] + 1, size=num_robots).astype(float)
+    robot_site = [names[int(i)] for i in rng.integers(num_sites, size=num_robots)]
+    speeds = [None if fixed[i] else float(rng.choice(ROBOT_SPEEDS)) for i in range(num_robots)]
+    robots = tuple(Robot(f"r{i}", tuple(int(c) for c in caps[i]), float(payloads[i])) for i in range(num_robots))
+    tasks, sites = [], []
+    for j in range(num_tasks):
+        while True:
+            a, b = (names[int(i)] for i in rng.choice(num_sites, size=2, replace=False))
+            if rng.random() >= TRANSPORT_SHARE:
+                b = a
+            able = ~fixed if a != b else ~fixed | (np.array(robot_site) == a)  # who can reach it
+            need_caps = np.array(_nonzero_vector(rng, k), dtype=bool)
+            need = float(np.clip(rng.poisson(TASK_PAYLOAD_MEAN), *PAYLOAD_RANGE))
+            if covers(caps[able], payloads[able], need_caps, need):
+                break
+        duration = float(rng.integers(DURATION_RANGE[0], DURATION_RANGE[1] + 1))
+        n_pre = min(j, int(rng.choice(len(PREREQ_PROBS), p=PREREQ_PROBS)))
+        pre = sorted(int(p) for p in rng.choice(j, size=n_pre, replace=False)) if n_pre else []
+        tasks.append(Task(f"t{j}", tuple(int(c) for c in need_caps), need, duration, tuple(f"t{p}" for p in pre)))
+        sites.append((f"t{j}", a, b))
+    travel = build_travel(coords, distances, [(r.id, s, v) for r, s, v in zip(robots, robot_site, speeds, strict=True)],
+                          sites)
+    return Instance(name, CAPABILITY_NAMES[:k], robots, tuple(tasks), travel=travel)
+
+
 def dataset_instance(spec: DatasetSpec, index: int, seed: int) -> Instance:
     rng = np.random.default_rng([seed, spec.code, index])
     n = int(rng.integers(spec.robots[0], spec.robots[1] + 1))
     m = int(rng.integers(spec.tasks[0], spec.tasks[1] + 1))
-    return random_instance(rng, n, m, f"{n}r-{m}t-{spec.key}-{index:05d}")
+    make = travel_instance if spec.travel else random_instance
+    return make(rng, n, m, f"{n}r-{m}t-{spec.key}-{index:05d}")
 
 
 def iter_dataset(key: str, seed: int, count: int | None = None) -> Iterator[tuple[str, Instance]]:

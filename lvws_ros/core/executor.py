@@ -111,6 +111,14 @@ class State:
             return 0.0
         return tr.arrival(team, [int(self.robot_site[r]) for r in team], task)
 
+    def arrivals(self, robots: npt.ArrayLike, tasks: npt.ArrayLike) -> FloatArray:
+        """(len(robots), len(tasks)): seconds each robot needs to reach each task alone
+        (zeros without travel; inf where it never can)."""
+        tr = self.instance.travel
+        if tr is None or self.robot_site is None:
+            return np.zeros((np.size(robots), np.size(tasks)))
+        return tr.arrivals(robots, self.robot_site[np.asarray(robots, dtype=np.int64)], tasks)
+
     def start(self, task: int, team: Sequence[int]) -> None:
         """The subteam is busy from now: it travels to the task (travel extension), which
         starts when its slowest member is there."""

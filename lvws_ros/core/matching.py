@@ -76,6 +76,7 @@ def greedy_match(
     robot_payload: FloatArray,
     task_caps: BoolArray,
     task_payload: FloatArray,
+    allowed: BoolArray | None = None,
 ) -> Match:
     """Sequential greedy for Eqs. 7-11.
 
@@ -85,8 +86,13 @@ def greedy_match(
     covered, minus members made redundant (subteams are inclusion-minimal). A partial
     subteam the free robots can no longer complete releases its robots. One vectorised
     argmax over n x (m+1) per pick: O(n * m) per pick, O(n^2 m) worst case.
+
+    ``allowed`` (n, m), when given, limits each task to the robots allowed for it (with
+    travel: the robots that can reach it at all); None allows every pair.
     """
     n, m = check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
+    if allowed is not None and allowed.shape != (n, m):
+        raise ValueError(f"allowed has shape {allowed.shape}, expected ({n}, {m})")
     free = np.ones(n, dtype=bool)
     waiting = np.zeros(n, dtype=bool)
     open_task = np.ones(m, dtype=bool)
@@ -98,8 +104,13 @@ def greedy_match(
         # A task is completable when its missing capabilities and payload can still come
         # from free robots. A partial subteam that cannot be completed releases its robots
         # (one task at a time, since released robots may complete another).
-        free_caps = robot_caps[free].any(axis=0) if free.any() else np.zeros(task_caps.shape[1], bool)
-        free_payload = float(robot_payload[free].sum())
+        if allowed is None:
+            free_caps = robot_caps[free].any(axis=0) if free.any() else np.zeros(task_caps.shape[1], bool)
+            free_payload: FloatArray | float = float(robot_payload[free].sum())
+        else:  # per task: the free robots allowed for it
+            can = (allowed & free[:, None]).astype(np.float64)  # (n, m)
+            free_caps = can.T @ robot_caps.astype(np.float64) > 0  # (m, K)
+            free_payload = can.T @ robot_payload.astype(np.float64)  # (m,)
         completable = covered(free_caps, free_payload, missing_caps, missing_payload)
         dead = np.flatnonzero(open_task & ~completable & member.any(axis=0))
         if len(dead):
@@ -111,6 +122,8 @@ def greedy_match(
         if not free.any():
             break
         ok = free[:, None] & (open_task & completable)[None, :] & helps(robot_caps, missing_caps, missing_payload)
+        if allowed is not None:
+            ok &= allowed
         i, j = _best_pick(r, ok, free)
         free[i] = False
         if j == m:

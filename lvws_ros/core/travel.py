@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from lvws_ros.core.subteams import FloatArray
 from lvws_ros.errors import InstanceError
@@ -48,9 +49,21 @@ class Travel:
     def arrival(self, team: Sequence[int], at: Sequence[int], task: int) -> float:
         """Seconds until the last member of ``team`` (now at sites ``at``) reaches ``task``
         (inf when a member can never do it: a fixed robot elsewhere or on a transport)."""
-        if not all(self.can_do(r, task) for r in team):
-            return math.inf
-        return max((self.time(r, a, self.task_from[task]) for r, a in zip(team, at, strict=True)), default=0.0)
+        return float(self.arrivals(team, at, [task]).max(initial=0.0))
+
+    def arrivals(self, robots: npt.ArrayLike, at: npt.ArrayLike, tasks: npt.ArrayLike) -> FloatArray:
+        """(len(robots), len(tasks)): seconds robot ``robots[i]`` (now at site ``at[i]``)
+        needs to reach task ``tasks[j]`` alone; inf when it can never do it (:meth:`time`,
+        :meth:`can_do`)."""
+        r, a, t = (np.asarray(x, dtype=np.int64).reshape(-1) for x in (robots, at, tasks))
+        speed = np.asarray(self.robot_speed, dtype=np.float64)[r][:, None]
+        d = self.distance[np.ix_(a, np.asarray(self.task_from, dtype=np.int64)[t])]
+        same = a[:, None] == np.asarray(self.task_from, dtype=np.int64)[t][None, :]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = np.where(same, 0.0, np.where(speed > 0, d / np.where(speed > 0, speed, 1.0), np.inf))
+        moves = np.asarray(self.task_from, dtype=np.int64)[t] != np.asarray(self.task_to, dtype=np.int64)[t]
+        out[(speed <= 0) & moves[None, :]] = np.inf  # a fixed robot never takes a task that moves its team
+        return np.asarray(out, dtype=np.float64)
 
     def key(self) -> tuple[object, ...]:
         return (self.sites, self.coordinates, self.overrides, self.robot_site, self.robot_speed, self.task_from,

@@ -41,7 +41,7 @@ def load_checkpoint(path: str | Path) -> tuple[GATN, dict[str, Any]]:
     """A model (in eval mode) and its metadata (training config, seeds, data)."""
     data = read_checkpoint(path)
     try:
-        model = GATN(GATNConfig(**data["config"]))
+        model = GATN(GATNConfig.from_dict(data["config"]))
         model.load_state_dict(data["state_dict"])
     except (KeyError, TypeError, RuntimeError) as exc:
         raise ModelError(f"{path}: checkpoint does not match the network ({type(exc).__name__}: {exc})") from None

@@ -40,7 +40,7 @@ from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Schedule
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import ModelError
-from lvws_ros.learning.features import GraphFeatures, InstanceFeatures
+from lvws_ros.learning.features import LEGACY_PAIR_FEATURES, PAIR_FEATURES, GraphFeatures, InstanceFeatures
 from lvws_ros.learning.loss import Demo, feasibility_mask
 from lvws_ros.policies.exact import ExactPolicy, departures, solve_exact
 
@@ -82,6 +82,8 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA) -> tuple
     ready[state.ready_tasks()] = True
     x = feasibility_mask(inst.robot_caps, inst.task_caps, inst.robot_payload, inst.task_payload)
     x[:, :m] &= ready[None, :]
+    if inst.travel is not None:  # with travel, only robots that can reach the task at all
+        x[:, :m] &= np.isfinite(state.arrivals(range(n), range(m)))
     x &= free[:, None]
     return e, x
 
@@ -218,6 +220,21 @@ def load_demos(path: str | Path) -> tuple[list[Demo], dict[str, Any]]:
                                                                                           strict=True)]
     except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
         raise ModelError(f"{p}: not a readable {DEMOS_FORMAT} file ({type(exc).__name__}: {exc})") from None
+    split["pairs"] = [_travel_columns(pairs, p) for pairs in split["pairs"]]
     demos = [Demo(GraphFeatures(*(split[name][k] for name in _ARRAYS[:7])), split["expert"][k], split["mask"][k])
              for k in range(count)]
     return demos, meta
+
+
+def _travel_columns(pairs: np.ndarray, path: Path) -> np.ndarray:
+    """Pair features as this version has them: a file written before the travel features
+    (LEGACY_PAIR_FEATURES columns, no travel) gets their columns as zeros, which is what
+    they are without travel."""
+    width = pairs.shape[-1] if pairs.ndim == 3 else -1
+    if width == PAIR_FEATURES:
+        return pairs
+    if width == LEGACY_PAIR_FEATURES:
+        pad = np.zeros((*pairs.shape[:-1], PAIR_FEATURES - width), pairs.dtype)
+        return np.concatenate([pairs, pad], axis=-1)
+    raise ModelError(f"{path}: pairs of shape {pairs.shape}: expected {PAIR_FEATURES} (or {LEGACY_PAIR_FEATURES}) "
+                     "pair features")

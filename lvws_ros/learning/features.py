@@ -29,7 +29,11 @@ idle task t_{M+1} is the last vertex, with no edges.
 Pair features (PAIR_FEATURES, ours, for the reward MLP of Eq. 6), only for the entries a
 decision reads (free robots x ready tasks, and the idle column, all zeros): robot i
 alone covers j (Eqs. 10-11); i holds a capability j needs; share of j's capabilities i
-holds; min(w_i / w_j, 2) / 2; i is the only free robot holding one of j's capabilities.
+holds; min(w_i / w_j, 2) / 2; i is the only free robot holding one of j's capabilities;
+and with travel (model ``lvws-gatn/3``; zeros without): i's arrival time at j and how
+much later it is than the earliest free robot's, each as x / (1 + x) of x = seconds /
+mean duration (1: never). A ``lvws-gatn/2`` checkpoint reads the first
+LEGACY_PAIR_FEATURES only.
 
 Cost per decision step: O(N K + T + E + R C K) with T the tasks not done, E their DAG
 edges, R the free robots and C the ready tasks; what depends on the instance alone is
@@ -49,7 +53,8 @@ from lvws_ros.core.subteams import TOLERANCE, covered, helps
 
 ROBOT_FEATURES = 7
 TASK_FEATURES = 17
-PAIR_FEATURES = 5
+PAIR_FEATURES = 7
+LEGACY_PAIR_FEATURES = 5  # lvws-gatn/2: no travel features
 CAP_COUNT = 10.0  # "fewest robots" saturates here
 
 F32 = npt.NDArray[np.float32]
@@ -151,10 +156,10 @@ class InstanceFeatures:
         rows_ = np.flatnonzero(free) if rows is None else np.asarray(rows, dtype=np.int64)
         ready = np.flatnonzero(status == TaskStatus.READY)
         cols = np.append(local[ready], t).astype(np.int64)
-        return GraphFeatures(robots, tasks, edges, rows_.astype(np.int64), cols, self.pairs(rows_, ready, free),
+        return GraphFeatures(robots, tasks, edges, rows_.astype(np.int64), cols, self.pairs(state, rows_, ready, free),
                              keep.astype(np.int64))
 
-    def pairs(self, rows: npt.NDArray[np.int64], ready: npt.NDArray[np.int64],
+    def pairs(self, state: State, rows: npt.NDArray[np.int64], ready: npt.NDArray[np.int64],
               free: npt.NDArray[np.bool_]) -> F32:
         """(len(rows), len(ready) + 1, PAIR_FEATURES); the idle column is zeros."""
         inst = self.instance
@@ -170,7 +175,19 @@ class InstanceFeatures:
         out[:, :-1, 3] = np.minimum(ratio, 2.0) / 2.0
         sole = (self.rc32[free].sum(axis=0) == 1).astype(np.float32)  # capabilities one free robot holds
         out[:, :-1, 4] = (rc * sole[None, :]) @ tc.T > 0
+        if inst.travel is not None:
+            arrive = state.arrivals(rows, ready) / self.time_unit  # (R, C), inf: never
+            first = state.arrivals(np.flatnonzero(free), ready).min(axis=0, initial=np.inf) / self.time_unit
+            out[:, :-1, 5] = _squash(arrive)
+            with np.errstate(invalid="ignore"):  # inf - inf where no free robot reaches j: never, 1
+                out[:, :-1, 6] = _squash(np.where(np.isfinite(arrive), arrive - first[None, :], np.inf))
         return out
+
+
+def _squash(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """x / (1 + x) for x >= 0, 1 at inf."""
+    finite = np.isfinite(x)
+    return np.where(finite, np.divide(x, 1.0 + x, where=finite, out=np.ones_like(x)), 1.0)
 
 
 def encode_state(state: State, cache: InstanceFeatures | None = None) -> GraphFeatures:

@@ -32,15 +32,22 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor, nn
 
-from lvws_ros.learning.features import PAIR_FEATURES, ROBOT_FEATURES, TASK_FEATURES, GraphFeatures
+from lvws_ros.learning.features import (
+    LEGACY_PAIR_FEATURES,
+    PAIR_FEATURES,
+    ROBOT_FEATURES,
+    TASK_FEATURES,
+    GraphFeatures,
+)
 
 NEG = -1e9  # masked logits
-MODEL_FORMAT = "lvws-gatn/2"
+MODEL_FORMAT = "lvws-gatn/3"  # /2: no travel pair features (config without pair_features)
 ENTRY_CHUNK = 1 << 18  # reward entries per chunk at inference: bounds memory at fleet scale
 INFERENCE_THREADS = 1
 ROW_CHUNK = 256  # attending robots per chunk of the dense robot GAT
@@ -56,9 +63,16 @@ class GATNConfig:
     mlp_hidden: int = 64
     use_transformer: bool = True
     wait_head: bool = False
+    pair_features: int = PAIR_FEATURES  # the first ones read; LEGACY_PAIR_FEATURES: lvws-gatn/2
 
     def to_dict(self) -> dict[str, int | bool]:
         return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> GATNConfig:
+        """A checkpoint's config; one written before the travel features (lvws-gatn/2)
+        has no ``pair_features`` and reads the first LEGACY_PAIR_FEATURES."""
+        return cls(**{"pair_features": LEGACY_PAIR_FEATURES, **data})
 
 
 def segment_softmax(logits: Tensor, segment: Tensor, count: int) -> Tensor:
@@ -209,10 +223,17 @@ class GATN(nn.Module):
         self.psi_r = nn.Linear(d, hid)
         self.psi_t = nn.Linear(d, hid, bias=False)
         self.psi_g = nn.Linear(2 * d, hid, bias=False)
-        self.psi_p = nn.Linear(PAIR_FEATURES, hid, bias=False)
+        if not 1 <= self.cfg.pair_features <= PAIR_FEATURES:
+            raise ValueError(f"pair_features must be in 1..{PAIR_FEATURES}, got {self.cfg.pair_features}")
+        self.psi_p = nn.Linear(self.cfg.pair_features, hid, bias=False)
         self.psi_out = nn.Sequential(nn.ReLU(), nn.Linear(hid, hid), nn.ReLU(), nn.Linear(hid, 1))
         self.wait = nn.Sequential(nn.Linear(2 * hid, hid), nn.ReLU(), nn.Linear(hid, 1)) if self.cfg.wait_head \
             else None
+
+    def psi_pairs(self, pairs: Tensor) -> Tensor:
+        """psi's pair term on the pair features this model reads (the first
+        ``cfg.pair_features``: a lvws-gatn/2 model reads no travel features)."""
+        return self.psi_p(pairs[..., : self.cfg.pair_features])
 
     def encode(self, batch: Batch) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """(h_r flat over real robots, h_t flat, g_r, g_t)."""
@@ -235,7 +256,7 @@ class GATN(nn.Module):
         hr, ht, g_r, g_t = self.encode(batch)
         g = self.psi_g(torch.cat([g_r, g_t], dim=-1))
         return self.psi_r(hr)[batch.entry_robot] + self.psi_t(ht)[batch.entry_task] + g[batch.entry_graph] \
-            + self.psi_p(batch.entry_pairs)
+            + self.psi_pairs(batch.entry_pairs)
 
     def forward(self, batch: Batch) -> Tensor:
         """(number of entries,) rewards, in the order of ``batch.entry_*``."""
@@ -268,7 +289,7 @@ class GATN(nn.Module):
         step = max(1, ENTRY_CHUNK // max(cols, 1))
         out, waits = [], []
         for a in range(0, rows, step):
-            z = pr[a:a + step, None, :] + pt[None, :, :] + self.psi_p(pairs[a:a + step])
+            z = pr[a:a + step, None, :] + pt[None, :, :] + self.psi_pairs(pairs[a:a + step])
             out.append(self.psi_out(z).squeeze(-1))
             if self.wait is not None:
                 zr = torch.relu(z)  # the idle entry is the last column

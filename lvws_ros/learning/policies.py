@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +35,12 @@ from lvws_ros.learning.gatn import GATN, decision_outputs, reward_matrix
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 NO_VOLUNTARY_WAIT = -1e6  # idle bias that leaves waiting only to robots with nothing to do
+
+
+def reachable(state: State, robots: Sequence[int], tasks: Sequence[int]) -> np.ndarray | None:
+    """(robots, tasks): the pairs the matching may use, with travel the robots that can
+    reach a task at all (a fixed robot only at its site); None without travel (all)."""
+    return None if state.instance.travel is None else np.isfinite(state.arrivals(robots, tasks))
 
 
 def _idle_last(sub: np.ndarray) -> None:
@@ -105,7 +112,8 @@ class LVWSPolicy:
             _idle_last(sub)
         else:
             sub[:, -1] += bias
-        args = (inst.robot_caps[robots], inst.robot_payload[robots], inst.task_caps[ready], inst.task_payload[ready])
+        args = (inst.robot_caps[robots], inst.robot_payload[robots], inst.task_caps[ready], inst.task_payload[ready],
+                reachable(state, robots, ready))
         match = greedy_match(sub, *args)
         if not match.teams and not (state.task_status == TaskStatus.ASSIGNED).any():
             _idle_last(sub)  # waiting now would stall: take the best task instead
@@ -143,7 +151,10 @@ class DBGMPolicy:
         assert self._cache is not None
         r = reward_matrix(self.model, self._cache.encode(state))  # rows free, columns ready (+ idle, unused)
         out: list[tuple[int, tuple[int, ...]]] = []
+        allowed = reachable(state, free, ready)
         alone = self._cache.alone[np.ix_(free, ready)]  # robot covers the task alone (Eqs. 10-11)
+        if allowed is not None:
+            alone = alone & allowed
         pairs = [(r[a, b], int(a), int(b)) for a, b in zip(*np.nonzero(alone), strict=True)]
         used_r: set[int] = set()
         used_t: set[int] = set()
@@ -161,7 +172,7 @@ class DBGMPolicy:
             _idle_last(sub)  # no idle task
             rr, tt = [free[a] for a in rest_r], [ready[b] for b in rest_t]
             match = greedy_match(sub, inst.robot_caps[rr], inst.robot_payload[rr], inst.task_caps[tt],
-                                 inst.task_payload[tt])
+                                 inst.task_payload[tt], None if allowed is None else allowed[np.ix_(rest_r, rest_t)])
             out += [(tt[j], tuple(rr[i] for i in team)) for j, team in match.teams.items()]
             used_r |= {rest_r[i] for team in match.teams.values() for i in team}
         return Decision(tuple(out), tuple(free[a] for a in range(len(free)) if a not in used_r))

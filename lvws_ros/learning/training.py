@@ -208,13 +208,27 @@ def split_training_instances(cfg: PipelineConfig, own: Sequence[Instance] = ()) 
     return train_set, val_set
 
 
-def _cache_path(cache_dir: str | Path, cfg: PipelineConfig, train_set: Sequence[Instance]) -> Path:
+def _cache_groups(cfg: PipelineConfig, train_set: Sequence[Instance]) -> list[tuple[str, list[Instance]]]:
+    """The training instances in two cached groups: without travel and with it (Dataset
+    IV), each named by its sources, so adding travel instances keeps the other group's
+    demonstrations."""
+    groups = []
+    for travel in (False, True):
+        names = [k for k in cfg.datasets if DATASETS[k].travel == travel]
+        if not travel:
+            names += [f"{k}{n}" for k, n in cfg.families]
+        part = [inst for inst in train_set if (inst.travel is not None) == travel]
+        if part:
+            groups.append(("-".join(names), part))
+    return groups
+
+
+def _cache_path(cache_dir: str | Path, cfg: PipelineConfig, train_set: Sequence[Instance], sources: str) -> Path:
     """Demonstrations are cached by what they are: the format, the sources, the content of
     every training instance and the expert's time limit."""
-    sources = "-".join([*cfg.datasets, *(f"{k}{n}" for k, n in cfg.families)])
     digest = hashlib.sha256("".join(instance_key(i) for i in train_set).encode()).hexdigest()[:12]
     version = DEMOS_FORMAT.split("/")[-1]
-    return Path(cache_dir) / (f"demos{version}-{sources or 'own'}-s{cfg.data_seed}-n{len(train_set)}"
+    return Path(cache_dir) / (f"demos{version}-{sources}-s{cfg.data_seed}-n{len(train_set)}"
                               f"-t{cfg.label_time_limit:g}-{digest}.npz")
 
 
@@ -239,7 +253,7 @@ def _dagger_job(args: tuple[Instance, dict[str, Any], dict[str, Any], bool, floa
                 ) -> list[Demo]:
     inst, state_dict, model_cfg, dbgm, idle_bias, threshold, time_limit, max_states = args
     torch.set_num_threads(1)  # one process per core
-    model = GATN(GATNConfig(**model_cfg))
+    model = GATN(GATNConfig.from_dict(model_cfg))
     model.load_state_dict(state_dict)
     return dagger_demos(inst, _policy(model.eval(), dbgm, idle_bias, threshold), time_limit=time_limit, workers=1,
                         max_states=max_states)
@@ -304,15 +318,19 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
             log(f"{init}: a wait head added")
         tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
         log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")
-    cache = _cache_path(cache_dir, cfg, train_set) if cache_dir else None
-    demos = _cached_demos(cache, log) if cache is not None else None
-    if demos is None:
-        t0 = time.perf_counter()
-        demos = label_instances(train_set, processes=cfg.processes, time_limit=cfg.label_time_limit,
-                                ray_address=cfg.ray_address, progress=progress)
-        log(f"expert demonstrations: {len(demos)} states in {time.perf_counter() - t0:.0f} s")
-        if cache is not None:
-            save_demos(demos, cache, {"datasets": cfg.datasets, "data_seed": cfg.data_seed})
+    demos: list[Demo] = []
+    own_group = [("-".join([*cfg.datasets, *(f"{k}{n}" for k, n in cfg.families), "own"]), list(train_set))]
+    for sources, part in own_group if own else _cache_groups(cfg, train_set):
+        cache = _cache_path(cache_dir, cfg, part, sources) if cache_dir else None
+        got = _cached_demos(cache, log) if cache is not None else None
+        if got is None:
+            t0 = time.perf_counter()
+            got = label_instances(part, processes=cfg.processes, time_limit=cfg.label_time_limit,
+                                  ray_address=cfg.ray_address, progress=progress)
+            log(f"expert demonstrations ({sources}): {len(got)} states in {time.perf_counter() - t0:.0f} s")
+            if cache is not None:
+                save_demos(got, cache, {"datasets": cfg.datasets, "data_seed": cfg.data_seed})
+        demos += got
     optimal = {instance_key(inst): float(solve_exact(inst, workers=2, time_limit=VALIDATION_TIME_LIMIT).makespan or 0.0)
                for inst in val_set}  # best known within the limit: only for model selection
     stages: list[dict[str, Any]] = []

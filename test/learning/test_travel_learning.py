@@ -1,0 +1,131 @@
+"""Travel in the learned policies (issue #15): Dataset IV, the travel pair features, the
+matching limited to robots that can reach a task, and models and demonstrations written
+before the travel features."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lvws_ros.core.datasets import DATASETS, dataset_instance
+from lvws_ros.core.executor import State, TaskStatus, simulate
+from lvws_ros.core.formats import instance_from_dict, instance_key, instance_to_dict
+from lvws_ros.core.matching import greedy_match
+from lvws_ros.core.schedule import check_schedule
+from lvws_ros.core.subteams import covers
+from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint, read_checkpoint
+from lvws_ros.learning.demonstrations import expert_demos, load_demos, save_demos
+from lvws_ros.learning.features import LEGACY_PAIR_FEATURES, PAIR_FEATURES, InstanceFeatures
+from lvws_ros.learning.gatn import GATN, GATNConfig, decision_outputs
+from lvws_ros.learning.policies import DBGMPolicy, LVWSPolicy, LVWSRolloutPolicy
+
+IV = DATASETS["IV"]
+
+
+def test_dataset_iv_is_feasible_reproducible_and_round_trips():
+    for k in (0, 1, 2, 3, 1500, 2100):
+        inst = dataset_instance(IV, k, seed=0)
+        tr = inst.travel
+        assert tr is not None and 3 <= len(tr.sites) <= 5
+        assert instance_key(dataset_instance(IV, k, seed=0)) == instance_key(inst)
+        again = instance_from_dict(instance_to_dict(inst))
+        assert instance_key(again) == instance_key(inst) and again.travel == tr
+        for j in range(inst.num_tasks):  # every task covered by the robots that can reach it
+            able = [r for r in range(inst.num_robots) if np.isfinite(tr.arrival([r], [tr.robot_site[r]], j))]
+            assert covers(inst.robot_caps[able], inst.robot_payload[able], inst.task_caps[j], inst.tasks[j].payload)
+        times = [tr.time(r, a, b) for r in range(inst.num_robots) for a in range(len(tr.sites))
+                 for b in range(len(tr.sites)) if np.isfinite(tr.time(r, a, b))]
+        assert all(float(t).is_integer() for t in times)  # integer travel times: exact proofs
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10**6))
+def test_greedy_match_never_uses_a_pair_it_is_not_allowed(seed):
+    rng = np.random.default_rng(seed)
+    n, m, k = int(rng.integers(1, 6)), int(rng.integers(1, 5)), 3
+    caps = rng.random((n, k)) < 0.5
+    need = rng.random((m, k)) < 0.4
+    need[~need.any(axis=1), 0] = True
+    payload, need_payload = rng.integers(1, 6, n).astype(float), rng.integers(0, 8, m).astype(float)
+    r = rng.normal(size=(n, m + 1))
+    allowed = rng.random((n, m)) < 0.6
+    match = greedy_match(r, caps, payload, need, need_payload, allowed)
+    for j, team in match.teams.items():
+        assert all(allowed[i, j] for i in team)
+        assert covers(caps[list(team)], payload[list(team)], need[j], need_payload[j])
+    # everything allowed is the matching without the argument
+    same = greedy_match(r, caps, payload, need, need_payload, np.ones((n, m), bool))
+    assert same == greedy_match(r, caps, payload, need, need_payload)
+
+
+def test_travel_pair_features_are_arrival_times_and_zero_without_travel():
+    inst = dataset_instance(IV, 5, seed=0)
+    state = State.initial(inst)
+    feats = InstanceFeatures(inst).encode(state)
+    assert feats.pairs.shape[-1] == PAIR_FEATURES
+    ready = np.flatnonzero(state.task_status == TaskStatus.READY)
+    arrive = state.arrivals(feats.rows, ready)
+    unit = float(inst.durations.mean())
+    expect = np.where(np.isfinite(arrive), (arrive / unit) / (1 + arrive / unit), 1.0)
+    assert np.allclose(feats.pairs[:, :-1, 5], expect)
+    best = arrive.min(axis=0)
+    assert np.allclose(feats.pairs[:, :-1, 6][arrive == best[None, :]], 0.0)  # the earliest robot: 0
+    assert np.all(feats.pairs[:, -1, :] == 0)  # the idle column
+    plain = dataset_instance(DATASETS["I"], 0, seed=0)
+    assert np.all(InstanceFeatures(plain).encode(State.initial(plain)).pairs[..., LEGACY_PAIR_FEATURES:] == 0)
+
+
+@pytest.mark.parametrize("make", [LVWSPolicy, DBGMPolicy, lambda: LVWSRolloutPolicy(budget_ms=200)])
+def test_learned_policies_give_schedules_valid_by_the_travel_rules(make):
+    for k in (2000, 2001, 2002, 2003):
+        inst = dataset_instance(IV, k, seed=0)
+        sched = simulate(inst, make()).schedule
+        assert check_schedule(inst, sched) == []
+        tr = inst.travel
+        for a in sched.assignments:  # nobody on a task it cannot reach (a fixed robot elsewhere)
+            j = inst.task_index[a.task]
+            assert all(tr.can_do(inst.robot_index[r], j) for r in a.robots)
+
+
+def test_a_model_written_before_the_travel_features_reads_the_first_five():
+    data = read_checkpoint(DEFAULT_MODELS["dbgm"])
+    assert "pair_features" not in data["config"]  # written as lvws-gatn/2
+    model, _ = load_checkpoint(DEFAULT_MODELS["dbgm"])
+    assert model.cfg.pair_features == LEGACY_PAIR_FEATURES
+    inst = dataset_instance(IV, 7, seed=0)
+    feats = InstanceFeatures(inst).encode(State.initial(inst))
+    blind = feats.pairs.copy()
+    blind[..., LEGACY_PAIR_FEATURES:] = 0
+    a = decision_outputs(model, feats)[0]
+    b = decision_outputs(model, replace(feats, pairs=blind))[0]
+    assert np.array_equal(a, b)  # the travel columns are not read
+    new = GATN(GATNConfig())
+    assert new.cfg.pair_features == PAIR_FEATURES and new.psi_p.in_features == PAIR_FEATURES
+    with pytest.raises(ValueError, match="pair_features"):
+        GATN(GATNConfig(pair_features=PAIR_FEATURES + 1))
+    torch.manual_seed(0)
+    assert not np.array_equal(decision_outputs(new, feats)[0],
+                              decision_outputs(new, replace(feats, pairs=blind))[0])
+
+
+def test_demonstrations_written_before_the_travel_features_read_with_zero_travel_columns(tmp_path):
+    inst = dataset_instance(DATASETS["II"], 3, seed=0)
+    demos = expert_demos(inst, time_limit=5, workers=1)
+    old = [replace(d, features=replace(d.features, pairs=d.features.pairs[..., :LEGACY_PAIR_FEATURES]))
+           for d in demos]
+    save_demos(old, tmp_path / "old.npz")
+    back, _ = load_demos(tmp_path / "old.npz")
+    assert len(back) == len(demos)
+    for a, b in zip(back, demos, strict=True):
+        assert a.features.pairs.shape == b.features.pairs.shape
+        assert np.array_equal(a.features.pairs, b.features.pairs)  # no travel: the columns are zeros
+    travel = expert_demos(dataset_instance(IV, 0, seed=0), time_limit=5, workers=1)
+    assert any(d.features.pairs[..., LEGACY_PAIR_FEATURES:].any() for d in travel)
+    for d in travel:  # X: only robots that can reach a task
+        assert d.mask.shape == d.expert.shape
+        assert not (d.expert > 0)[~d.mask].any()
