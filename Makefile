@@ -59,6 +59,8 @@ test: env lint
 # LVWS model) + recorder; the bag lands in bags/, Gantt PNG, GIF and logs in out/.
 demo: env
 	$(PY) -m lvws_ros.cli launch --bag-dir bags --out-dir out
+	@echo "Plans with and without travel, executed in the simulator (lvws sim --compare):"
+	$(PY) -m lvws_ros.cli sim --compare grp,lvws,exact
 
 # Property-based fuzzing of the file formats: 10^4 examples per property, counts printed.
 fuzz: env

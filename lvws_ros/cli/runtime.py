@@ -23,7 +23,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from lvws_ros.sim.runner import run_offline
     from lvws_ros.sim.world import CellSim
 
-    sim = CellSim(load_cell_config(args.config or case_study_config()))
+    cfg = load_cell_config(args.config or case_study_config())
+    if args.compare:
+        return _compare_travel(cfg, args)
+    sim = CellSim(cfg)
     events = load_events(args.events) if args.events else None
     options = {"model_path": args.model} if args.model and args.policy in LEARNED_POLICIES else {}
     try:
@@ -36,6 +39,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
     problems = check_schedule(sim.executed_instance(), sched)
     print(f"{args.policy}: makespan {sched.makespan:.2f} s, {len(decisions)} decisions, "
           f"valid: {'yes' if not problems else problems}")
+    if not events:  # the policy's own plan of the cell, for comparison
+        from lvws_ros.core.executor import simulate
+
+        plan = simulate(sim.inst, make_policy(args.policy, seed=args.seed, **options)).schedule.makespan
+        print(f"  plan (the executor on the cell's instance{', travel included' if sim.inst.travel else ''}): "
+              f"{plan:.2f} s; executed - plan: {sched.makespan - plan:+.2f} s "
+              f"({100 * (sched.makespan - plan) / plan:+.2f} %)")
     for d in decisions:
         made = ", ".join(f"{t}<-{'+'.join(r)}" for t, r in d.assignments) or "-"
         print(f"  step {d.step} t={d.team_stamp:.2f}: {made}; waiting {', '.join(d.waiting) or '-'}")
@@ -51,6 +61,32 @@ def cmd_sim(args: argparse.Namespace) -> int:
         paths = render_frames(sim.cfg, sim.trace, sim.inst.num_tasks, args.frames)
         print(f"{len(paths)} PNG frames in {args.frames}")
     return 0 if not problems else 1
+
+
+def _compare_travel(cfg: Any, args: argparse.Namespace) -> int:
+    """``lvws sim --compare``: each policy planned with travel, executed told the travel
+    and not (lvws_ros.sim.runner.compare_travel), as a table."""
+    from lvws_ros.errors import PolicyError
+    from lvws_ros.registry import make_policy
+    from lvws_ros.sim.runner import compare_travel
+
+    names = [n for n in args.compare.split(",") if n]
+    unknown = [n for n in names if n not in POLICY_NAMES]
+    if unknown or not names:
+        raise PolicyError(f"--compare: unknown policy {unknown[0]!r}; choose from {', '.join(POLICY_NAMES)}"
+                          if unknown else "--compare: name at least one policy")
+
+    def maker(name: str) -> Any:
+        options = {"model_path": args.model} if args.model and name in LEARNED_POLICIES else {}
+        return lambda: make_policy(name, seed=args.seed, **options)
+
+    rows = compare_travel(cfg, [(n, maker(n)) for n in names])
+    print(f"{cfg.name}: makespans in seconds of sim time (seed {args.seed})")
+    print("| policy | plan with travel | executed | executed - plan | executed, scheduler told no travel |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r.policy} | {r.plan:.2f} | {r.executed:.2f} | {100 * r.plan_error:+.2f} % | {r.blind:.2f} |")
+    return 0
 
 
 def cmd_launch(args: argparse.Namespace) -> int:
@@ -142,6 +178,9 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--frames", help="write a PNG per frame into this folder")
     p.add_argument("--frame-every", type=float, default=2.0, help="sim seconds between frames")
     p.add_argument("--events", default=None, help="scripted world events (YAML); see lvws_ros/sim/events.py")
+    p.add_argument("--compare", default=None, metavar="POLICIES",
+                   help="comma-separated policies: each one's plan with travel, its executed makespan, and the "
+                        "makespan when the scheduler is told no travel (a cell with plan_travel)")
 
     p = add("launch", cmd_launch, "the case study on ROS 2: cell_sim + scheduler + recorder, then a summary")
     p.add_argument("--policy", choices=POLICY_NAMES, default=None,

@@ -220,7 +220,8 @@ def voluntary_waits(state: State, decision: Decision) -> dict[int, tuple[int, ..
     A wait is voluntary (the paper's behaviour, section III-A) when some ready task the
     decision leaves unassigned has a covering subteam (Eqs. 10-11) among the robots it
     leaves free that includes the robot and needs it (found constructively,
-    :func:`~lvws_ros.core.subteams.cover_with`). Returns robot index -> those task indices.
+    :func:`~lvws_ros.core.subteams.cover_with`); with travel, among those that can reach
+    the task at all. Returns robot index -> those task indices.
     """
     inst = state.instance
     taken = {r for _, team in decision.assignments for r in team}
@@ -229,11 +230,14 @@ def voluntary_waits(state: State, decision: Decision) -> dict[int, tuple[int, ..
     out: dict[int, list[int]] = {}
     if not left:
         return {}
-    caps, payloads = inst.robot_caps[left], inst.robot_payload[left]
-    for j in state.ready_tasks():
-        if j in started or not covers(caps, payloads, inst.task_caps[j], inst.tasks[j].payload):
+    ready = [j for j in state.ready_tasks() if j not in started]
+    reach = np.isfinite(state.arrivals(left, ready))  # with travel, only robots that can reach a task
+    for c, j in enumerate(ready):
+        able = [r for r, ok in zip(left, reach[:, c], strict=True) if ok]
+        caps, payloads = inst.robot_caps[able], inst.robot_payload[able]
+        if not able or not covers(caps, payloads, inst.task_caps[j], inst.tasks[j].payload):
             continue
-        for k, r in enumerate(left):
+        for k, r in enumerate(able):
             if cover_with(caps, payloads, inst.task_caps[j], inst.tasks[j].payload, k) is not None:
                 out.setdefault(r, []).append(j)
     return {r: tuple(ts) for r, ts in sorted(out.items())}

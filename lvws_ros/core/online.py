@@ -48,6 +48,7 @@ import numpy as np
 from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, check_decision
 from lvws_ros.core.problem import MAX_VALUE, Instance, Robot, Task
 from lvws_ros.core.subteams import covered
+from lvws_ros.core.travel import Travel, build_travel
 from lvws_ros.errors import InstanceError
 
 BUSY_EPS = 1e-3  # a busy robot with an overdue estimate is still busy
@@ -64,6 +65,8 @@ class RobotInfo:
     current_task: str = ""
     busy_for: float = 0.0
     pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    site: str = ""  # travel: the site it is at when free ("": off every site, at its pose)
+    speed: float = 0.0  # travel: > 0 mobile, 0 fixed at its site
 
 
 @dataclass(frozen=True)
@@ -77,6 +80,8 @@ class TaskInfo:
     assigned_robots: tuple[str, ...] = ()
     start: float | None = None
     end: float | None = None
+    site_from: str = ""  # travel: where its subteam meets
+    site_to: str = ""  # travel: where its subteam is when it is done ("": site_from)
 
 
 @dataclass(frozen=True)
@@ -91,6 +96,10 @@ class GraphSnapshot:
     stamp: float
     capability_names: tuple[str, ...]
     tasks: tuple[TaskInfo, ...]
+    # travel (none: zero travel): sites (name, x, y) and, optionally, the distance matrix
+    # row-major over them (empty: straight lines between the coordinates)
+    sites: tuple[tuple[str, float, float], ...] = ()
+    distances: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -134,6 +143,9 @@ def check_team(snap: TeamSnapshot) -> None:
         _finite(r.payload, f"{where}.payload")
         if r.payload <= 0:
             raise InstanceError(f"{where}.payload: must be > 0, got {r.payload!r}")
+        _finite(r.speed, f"{where}.speed")
+        if 0 < r.speed < 1 / MAX_VALUE:
+            raise InstanceError(f"{where}.speed: 0 (fixed) or at least {1 / MAX_VALUE:g}, got {r.speed!r}")
 
 
 def check_graph(snap: GraphSnapshot) -> None:
@@ -161,7 +173,31 @@ def check_graph(snap: GraphSnapshot) -> None:
         for name, value in (("start_time", t.start), ("end_time", t.end)):
             if value is not None:
                 _finite(value, f"{where}.{name}", high=math.inf)
+    _check_sites(snap)
     _check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
+
+
+def _check_sites(snap: GraphSnapshot) -> None:
+    """The travel part of a TaskGraph: unique named sites with finite coordinates, a
+    distance matrix of |sites|^2 entries or none, every task at known sites."""
+    names = [s[0] for s in snap.sites]
+    if len(set(names)) != len(names) or "" in names:
+        raise InstanceError("TaskGraph sites: ids must be unique and non-empty")
+    for n, (name, x, y) in enumerate(snap.sites):
+        _finite(x, f"TaskGraph sites[{n}] ({name!r}).x", low=-MAX_VALUE)
+        _finite(y, f"TaskGraph sites[{n}] ({name!r}).y", low=-MAX_VALUE)
+    if snap.distances and len(snap.distances) != len(names) ** 2:
+        raise InstanceError(f"TaskGraph site_distances: {len(snap.distances)} entries for {len(names)} sites "
+                            f"(expected {len(names) ** 2}, row-major, or none)")
+    for n, d in enumerate(snap.distances):
+        _finite(d, f"TaskGraph site_distances[{n}]")
+    known = set(names)
+    for n, t in enumerate(snap.tasks):
+        for field_, value in (("site_from", t.site_from), ("site_to", t.site_to)):
+            if value and value not in known:
+                raise InstanceError(f"TaskGraph tasks[{n}] ({t.id!r}).{field_}: unknown site {value!r}")
+        if known and not t.site_from:
+            raise InstanceError(f"TaskGraph tasks[{n}] ({t.id!r}).site_from: empty, but the graph has sites")
 
 
 @functools.lru_cache(maxsize=4)
@@ -181,7 +217,34 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
     robots = tuple(Robot(r.id, tuple(int(c) for c in r.capabilities), float(r.payload)) for r in team.robots)
     tasks = tuple(Task(t.id, tuple(int(c) for c in t.capabilities), float(t.payload), float(t.duration),
                        tuple(t.prerequisites)) for t in graph.tasks)
-    return Instance(name, tuple(graph.capability_names), robots, tasks)
+    travel = snapshot_travel(team, graph) if graph.sites else None
+    return Instance(name, tuple(graph.capability_names), robots, tasks, travel=travel)
+
+
+def off_site(robot: RobotInfo) -> str:
+    """The site of a robot off every named site (a robot stopped between sites): its pose."""
+    return f"@{robot.id}"
+
+
+def snapshot_travel(team: TeamSnapshot, graph: GraphSnapshot) -> Travel:
+    """The travel of the snapshots: the graph's sites (plus one at the pose of each mobile
+    robot off every site), each robot at its site, each task at its sites."""
+    known = {s[0] for s in graph.sites}
+    sites = {name: (x, y) for name, x, y in graph.sites}
+    extra = [r for r in team.robots if r.site not in known]
+    for r in extra:
+        if r.speed == 0 and r.site:
+            raise InstanceError(f"TeamState robot {r.id!r}.site: unknown site {r.site!r} for a fixed robot")
+        sites[off_site(r)] = (r.pose[0], r.pose[1])
+    names = [s[0] for s in graph.sites]
+    distances: dict[str, dict[str, float]] = {}
+    if graph.distances:
+        for a, name in enumerate(names):
+            distances[name] = {b: graph.distances[a * len(names) + k] for k, b in enumerate(names) if b != name}
+    robots = [(r.id, r.site if r.site in known else off_site(r), r.speed if r.speed > 0 else None)
+              for r in team.robots]
+    tasks = [(t.id, t.site_from, t.site_to or t.site_from) for t in graph.tasks]
+    return build_travel(sites, distances, robots, tasks)
 
 
 def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot, dict[str, str]]:
@@ -267,7 +330,22 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
             start[j] = end - inst.durations[j]
         elif status[j] == TaskStatus.DONE:
             start[j] = t.start if t.start is not None else now - inst.durations[j]
-    return State(inst, now, free_at, status, start, teams)
+    return State(inst, now, free_at, status, start, teams, robot_site=_robot_sites(inst, team, status, teams))
+
+
+def _robot_sites(inst: Instance, team: TeamSnapshot, status: np.ndarray,
+                 teams: Sequence[tuple[int, ...]]) -> np.ndarray | None:
+    """With travel, where each robot is (a free one) or will be when its task is done
+    (a busy one: the task's end site, which the world may also give as its site)."""
+    tr = inst.travel
+    if tr is None:
+        return None
+    index = {name: k for k, name in enumerate(tr.sites)}
+    site = np.array([index.get(r.site, index.get(off_site(r), tr.robot_site[i])) for i, r in enumerate(team.robots)],
+                    dtype=np.int64)
+    for j in np.flatnonzero(status == TaskStatus.ASSIGNED):
+        site[list(teams[int(j)])] = tr.task_to[int(j)]
+    return site
 
 
 def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: GraphSnapshot, now: float,
@@ -284,8 +362,13 @@ def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: G
 def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:
     """What the scheduling instance of two snapshots depends on: equal keys, same instance
     (a new one when tasks or robots come or go, or change)."""
+    known = {s[0] for s in graph.sites}
     return (team.capability_names, tuple((r.id, r.capabilities, r.payload) for r in team.robots),
-            tuple((t.id, t.capabilities, t.payload, t.duration, t.prerequisites) for t in graph.tasks))
+            tuple((t.id, t.capabilities, t.payload, t.duration, t.prerequisites) for t in graph.tasks),
+            # travel: the sites, speeds and task sites; where a robot is only when it is off
+            # every site (a new site at its pose); the state follows the robots (build_state)
+            graph.sites, graph.distances, tuple((t.site_from, t.site_to) for t in graph.tasks),
+            tuple((r.speed, r.pose[:2] if graph.sites and r.site not in known else None) for r in team.robots))
 
 
 class OnlineScheduler:

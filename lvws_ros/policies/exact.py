@@ -521,9 +521,15 @@ class ExactPolicy:
         return any(abs(self._leave.get(a.task, a.start) - t) <= TOLERANCE or abs(a.end - t) <= TOLERANCE
                    for a in self._plan.values())
 
+    def _missed(self, state: State) -> bool:
+        """A ready task whose planned departure has passed (the world ran late): waiting
+        for it would stall."""
+        return any(self._leave.get(a.task, a.start) < state.time - TOLERANCE
+                   for j in state.ready_tasks() if (a := self._plan.get(j)) is not None)
+
     def decide(self, state: State) -> Decision:
         inst = state.instance
-        if self.result is not None and not self._expected(state.time):
+        if self.result is not None and (not self._expected(state.time) or self._missed(state)):
             self.result = None  # the world deviated from the plan (online use): re-solve from here
         if self.result is None:
             self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed)

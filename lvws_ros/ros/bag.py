@@ -27,7 +27,7 @@ from lvws_ros.ros.topics import ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GRAPH_TOPI
 
 __all__ = ["Run", "flush", "open_writer", "qos_from_bag", "qos_to_bag", "read_run", "reindex", "typestore"]
 
-LVWS_TYPES = ("RobotState", "TeamState", "Task", "TaskGraph", "Assignment", "AssignmentArray")
+LVWS_TYPES = ("RobotState", "TeamState", "Site", "Task", "TaskGraph", "Assignment", "AssignmentArray")
 
 
 def typestore() -> Typestore:

@@ -10,7 +10,7 @@ import math
 from typing import Any
 
 from builtin_interfaces.msg import Duration, Time
-from lvws_msgs.msg import Assignment, AssignmentArray, CellTask, RobotState, Task, TaskGraph, TeamState
+from lvws_msgs.msg import Assignment, AssignmentArray, CellTask, RobotState, Site, Task, TaskGraph, TeamState
 
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskInfo, TeamSnapshot
@@ -49,17 +49,20 @@ def team_to_msg(snap: TeamSnapshot, frame_id: str = "map") -> TeamState:
     msg = _stamped(TeamState(), snap, frame_id)
     for r in snap.robots:
         rs = RobotState(id=r.id, kind=r.kind, available=r.available, capabilities=list(r.capabilities),
-                        payload=float(r.payload), current_task=r.current_task, busy_for=float(r.busy_for))
+                        payload=float(r.payload), current_task=r.current_task, busy_for=float(r.busy_for),
+                        site=r.site, speed=float(r.speed))
         rs.pose.x, rs.pose.y, rs.pose.theta = r.pose
         msg.robots.append(rs)
     return msg
 
 
 def team_from_msg(msg: Any) -> TeamSnapshot:
+    """(Messages recorded before the travel fields read as zero travel.)"""
     return TeamSnapshot(
         from_time(msg.header.stamp), tuple(msg.capability_names),
         tuple(RobotInfo(r.id, r.kind, bool(r.available), tuple(int(c) for c in r.capabilities), float(r.payload),
-                        r.current_task, float(r.busy_for), (float(r.pose.x), float(r.pose.y), float(r.pose.theta)))
+                        r.current_task, float(r.busy_for), (float(r.pose.x), float(r.pose.y), float(r.pose.theta)),
+                        str(getattr(r, "site", "")), float(getattr(r, "speed", 0.0)))
               for r in msg.robots))
 
 
@@ -69,7 +72,10 @@ def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
         msg.tasks.append(Task(id=t.id, status=int(t.status), capabilities=list(t.capabilities),
                               payload=float(t.payload), duration=float(t.duration),
                               prerequisites=list(t.prerequisites), assigned_robots=list(t.assigned_robots),
-                              start_time=to_time(t.start or 0.0), end_time=to_time(t.end or 0.0)))
+                              start_time=to_time(t.start or 0.0), end_time=to_time(t.end or 0.0),
+                              site_from=t.site_from, site_to=t.site_to))
+    msg.sites = [Site(id=name, x=float(x), y=float(y)) for name, x, y in snap.sites]
+    msg.site_distances = [float(d) for d in snap.distances]
     return msg
 
 
@@ -80,8 +86,11 @@ def graph_from_msg(msg: Any) -> GraphSnapshot:
         start = from_time(t.start_time) if status >= TaskStatus.ASSIGNED else None
         end = from_time(t.end_time) if status == TaskStatus.DONE else None
         tasks.append(TaskInfo(t.id, status, tuple(int(c) for c in t.capabilities), float(t.payload),
-                              float(t.duration), tuple(t.prerequisites), tuple(t.assigned_robots), start, end))
-    return GraphSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names), tuple(tasks))
+                              float(t.duration), tuple(t.prerequisites), tuple(t.assigned_robots), start, end,
+                              str(getattr(t, "site_from", "")), str(getattr(t, "site_to", ""))))
+    sites = tuple((str(s.id), float(s.x), float(s.y)) for s in getattr(msg, "sites", ()))
+    return GraphSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names), tuple(tasks), sites,
+                         tuple(float(d) for d in getattr(msg, "site_distances", ())))
 
 
 def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:

@@ -73,6 +73,10 @@ class CellConfig:
     robots: tuple[RobotSpec, ...]
     objects: Mapping[str, ObjectSpec]
     tasks: tuple[TaskSpec, ...]
+    # Plan with travel (the travel extension of formats.md): the instance has the cells and
+    # the mobile robots' start points as sites; robots arrive when the plan says; transports
+    # carry at nominal_speed. False (a file without the key): no travel in the plan, as before.
+    plan_travel: bool = False
 
 
 def _num(value: Any, what: str, *, positive: bool = True) -> float:
@@ -176,4 +180,11 @@ def _parse_config(d: dict[str, Any]) -> CellConfig:
                                                                   positive=False),
         arrive_tolerance=_num(sim.get("arrive_tolerance", 0.05), "sim.arrive_tolerance"),
         nominal_speed=_num(d.get("nominal_speed", 0.8), "nominal_speed"),
-        cells=cells, robots=robots, objects=objects, tasks=tasks)
+        cells=cells, robots=robots, objects=objects, tasks=tasks, plan_travel=_flag(d.get("plan_travel", False),
+                                                                                 "plan_travel"))
+
+
+def _flag(value: Any, what: str) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{what}: expected true or false, got {value!r}")
+    return value

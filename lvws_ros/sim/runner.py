@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
-from lvws_ros.core.executor import Policy
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from lvws_ros.core.executor import Policy, simulate
 from lvws_ros.core.online import OnlineDecision, OnlineScheduler
 from lvws_ros.core.schedule import Schedule
 from lvws_ros.errors import PolicyError, WorldStuck
+from lvws_ros.sim.config import CellConfig
 from lvws_ros.sim.events import WorldEvent, apply_event, stuck_reason
 from lvws_ros.sim.world import CellSim
 
-__all__ = ["run_offline"]
+__all__ = ["TravelComparison", "compare_travel", "run_offline"]
 
 
 def run_offline(sim: CellSim, policy: Policy, *, max_time: float = 3600.0,
@@ -50,3 +54,34 @@ def run_offline(sim: CellSim, policy: Policy, *, max_time: float = 3600.0,
         sim.record_frame()
     latency = sum(d.latency for d in decisions)
     return sim.schedule(policy.name, len(decisions), latency), decisions
+
+
+@dataclass(frozen=True)
+class TravelComparison:
+    """One policy on a cell with ``plan_travel``: its plan, what the world executed of it,
+    and what a scheduler told nothing of the travel executes in the same world."""
+
+    policy: str
+    plan: float  # makespan of the policy in the executor on the cell's instance (travel in the plan)
+    executed: float  # in the simulator, the scheduler given the travel
+    blind: float  # in the simulator, the scheduler given no travel (the paper's instance)
+
+    @property
+    def plan_error(self) -> float:
+        """(executed - plan) / plan: how closely the world follows the plan."""
+        return (self.executed - self.plan) / self.plan if self.plan > 0 else 0.0
+
+
+def compare_travel(cfg: CellConfig, policies: Sequence[tuple[str, Callable[[], Policy]]]) -> list[TravelComparison]:
+    """Each (name, policy maker) planned in the executor and run twice in the simulator,
+    told the travel and not (``CellSim.share_travel``); the cell must plan with travel."""
+    rows = []
+    for name, make in policies:
+        aware = CellSim(cfg)
+        if aware.inst.travel is None:
+            raise PolicyError(f"{cfg.name}: the cell does not plan with travel (plan_travel: false)")
+        plan = simulate(aware.inst, make()).schedule.makespan
+        executed = run_offline(aware, make())[0].makespan
+        blind = run_offline(CellSim(cfg, share_travel=False), make())[0].makespan
+        rows.append(TravelComparison(name, plan, executed, blind))
+    return rows

@@ -16,6 +16,13 @@ offline runner and the tests drive it.
   returns READY; a carried object is put down where it is, and a transport picks it up
   from there), :meth:`CellSim.repair` brings it back. :meth:`CellSim.impossible` names the
   tasks the team left can never do. Refusals are :class:`~lvws_ros.errors.WorldEventRejected`.
+* With ``plan_travel`` (the shipped config), the instance has the travel extension of
+  formats.md (:func:`build_instance`: cells and start points as sites, distances that
+  bound the drive to a member's slot); members pace their approach to arrive when the plan
+  says (the task starts when the last one is there), a member already at the object stays
+  where it stands, and a transport carries at ``nominal_speed`` keeping its formation, so
+  the world executes a plan on time. ``share_travel=False`` keeps the travel out of the
+  snapshots (a travel-blind scheduler in the same world).
 * The scheduling instance (:attr:`CellSim.inst`) carries nominal durations; the
   executed schedule (:meth:`CellSim.schedule`) carries what really happened, approach
   drives and real speeds included, and is valid by the rules of formats.md for the
@@ -29,6 +36,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
 import pymunk
 
 from lvws_ros.core.executor import TaskStatus
@@ -36,6 +44,7 @@ from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapsho
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import shortfall
+from lvws_ros.core.travel import Travel, build_travel
 from lvws_ros.errors import AssignmentRejected, ConfigError, WorldEventRejected
 from lvws_ros.sim.config import ARM_KINDS, MOBILE_KINDS, CellConfig, RobotSpec, TaskSpec, parse_task
 
@@ -49,8 +58,33 @@ def _dist(a: Sequence[float], b: Sequence[float]) -> float:
     return math.hypot(a[0] - b[0], a[1] - b[1])
 
 
+SLOT_RADIUS = 0.8  # members stand this far from the object they work on (_slot)
+
+
+def start_site(robot_id: str) -> str:
+    """The site where a mobile robot starts (the travel plan, ``plan_travel``)."""
+    return f"{robot_id}_start"
+
+
+def _travel(cfg: CellConfig) -> Travel:
+    """The cell's travel (``plan_travel``): the cells and each mobile robot's start point
+    as sites. A distance includes SLOT_RADIUS at each cell end (a member stands at a slot
+    around the object, not at the cell's centre), so it bounds the drive between any two
+    slots and robots can arrive when the plan says."""
+    sites = {c.id: c.position for c in cfg.cells.values()}
+    sites.update({start_site(r.id): r.start for r in cfg.robots if r.kind in MOBILE_KINDS})
+    offset = {name: SLOT_RADIUS if name in cfg.cells else 0.0 for name in sites}
+    distances = {a: {b: round(_dist(pa, pb) + offset[a] + offset[b], 6) for b, pb in sites.items() if b != a}
+                 for a, pa in sites.items()}
+    robots = [(r.id, str(r.cell), None) if r.kind in ARM_KINDS else (r.id, start_site(r.id), r.speed)
+              for r in cfg.robots]
+    tasks = [(t.id, t.source or t.cell, t.cell) for t in cfg.tasks]
+    return build_travel({k: list(v) for k, v in sites.items()}, distances, robots, tasks)
+
+
 def build_instance(cfg: CellConfig) -> Instance:
-    """The scheduling problem of the case study, with nominal durations."""
+    """The scheduling problem of the case study, with nominal durations (and, with
+    ``plan_travel``, the travel between cells)."""
     caps = cfg.capabilities
 
     def vec(*names: str) -> tuple[int, ...]:
@@ -70,7 +104,7 @@ def build_instance(cfg: CellConfig) -> Instance:
         else:
             tasks.append(Task(t.id, vec("manipulation", f"@{t.cell}"), t.payload, t.duration, t.after,
                               {"type": t.type, "object": t.object, "cell": t.cell}))
-    return Instance(cfg.name, caps, robots, tuple(tasks))
+    return Instance(cfg.name, caps, robots, tuple(tasks), travel=_travel(cfg) if cfg.plan_travel else None)
 
 
 @dataclass
@@ -82,6 +116,8 @@ class _Job:
     phase: str  # transport: approach, load, carry, unload; assembly: work
     timer: float = 0.0
     targets: dict[str, tuple[float, float]] = field(default_factory=dict)
+    due: dict[str, float] = field(default_factory=dict)  # plan_travel: when each member arrives
+    pickup: tuple[float, float] = (0.0, 0.0)  # transport: where the object is picked up
 
 
 @dataclass(frozen=True)
@@ -108,8 +144,11 @@ class Event:
 class CellSim:
     """The case-study world. ``assign`` starts tasks, ``step`` advances sim time by dt."""
 
-    def __init__(self, cfg: CellConfig) -> None:
+    def __init__(self, cfg: CellConfig, share_travel: bool = True) -> None:
         self.cfg = cfg
+        # False: the snapshots leave the travel out (a travel-blind scheduler in the same
+        # world, for comparison); the world still moves by the plan's travel
+        self.share_travel = share_travel
         self.inst = build_instance(self.cfg)
         self.space = pymunk.Space()
         self.time = 0.0
@@ -139,6 +178,8 @@ class CellSim:
         self.end: dict[str, float] = {}
         self.team: dict[str, tuple[str, ...]] = {}
         self.robot_task: dict[str, str | None] = {r.id: None for r in self.cfg.robots}
+        # where each robot is when free (plan_travel): a cell, its start, or "" off every site
+        self.robot_site = {r.id: str(r.cell) if r.kind in ARM_KINDS else start_site(r.id) for r in self.cfg.robots}
         self.failed: set[str] = set()
         self.jobs: dict[str, _Job] = {}
         self.trace: list[Frame] = []
@@ -159,7 +200,15 @@ class CellSim:
         on the floor) (fixed offsets, so a team carrying together keeps its formation)."""
         x, y = self.cfg.cells[cell].position if isinstance(cell, str) else cell
         ang = math.pi / 2 + 2 * math.pi * k / max(n, 1)
-        return (x + 0.8 * math.cos(ang), y + 0.8 * math.sin(ang))
+        return (x + SLOT_RADIUS * math.cos(ang), y + SLOT_RADIUS * math.sin(ang))
+
+    def _stand(self, rid: str, at: tuple[float, float], k: int, n: int) -> tuple[float, float]:
+        """Where member k of n stands to pick up an object at ``at``: where it is if it is
+        at that spot already (a robot that brought something there works on from where it
+        stands, no move, as the plan's zero travel says), else its slot."""
+        here = self.position(rid)
+        near = _dist(here, at) <= SLOT_RADIUS + self.cfg.arrive_tolerance
+        return here if self.cfg.plan_travel and near else self._slot(at, k, n)
 
     # -- state ------------------------------------------------------------------------
     @property
@@ -232,11 +281,29 @@ class CellSim:
             pickup: str | tuple[float, float] = spec.source
             if self.object_cell[spec.object] == FLOOR:  # put down by an interrupted transport
                 pickup = self.position(spec.object)
-            job = _Job(spec, team, "approach",
-                       targets={r: self._slot(pickup, k, len(team)) for k, r in enumerate(team)})
+            at = self.cfg.cells[pickup].position if isinstance(pickup, str) else pickup
+            job = _Job(spec, team, "approach", pickup=at,
+                       targets={r: self._stand(r, at, k, len(team)) for k, r in enumerate(team)})
+            if self.cfg.plan_travel:  # each member arrives when the plan says; the task starts then
+                job.due = {r: self.time + self._travel_time(r, spec.source) for r in team}
+                self.start[task_id] = max(job.due.values())
         else:
             job = _Job(spec, team, "work", timer=spec.duration)
         self.jobs[task_id] = job
+
+    def _travel_time(self, rid: str, site: str) -> float:
+        """Seconds the plan gives robot ``rid`` from where it is to ``site`` (plan_travel):
+        the instance's travel from its site, or straight from its pose when it is off
+        every site (the snapshots' rule: lvws_ros.core.online.snapshot_travel)."""
+        tr = self.inst.travel
+        assert tr is not None
+        spec = self.robot_spec[rid]
+        here = self.robot_site[rid]
+        if here == site:
+            return 0.0
+        if not here:
+            return _dist(self.position(rid), self.cfg.cells[site].position) / spec.speed
+        return tr.time(self.inst.robot_index[rid], tr.sites.index(here), tr.sites.index(site))
 
     # -- a changing world ------------------------------------------------------------------
     def _rebuild(self, tasks: Sequence[TaskSpec]) -> None:
@@ -253,6 +320,8 @@ class CellSim:
             self.bodies[job.task.object].velocity = (0.0, 0.0)
         for rid in job.team:
             self.robot_task[rid] = None
+            if self.robot_spec[rid].kind in MOBILE_KINDS:
+                self.robot_site[rid] = ""  # stopped between sites
         self.status[task_id] = READY
         self.start.pop(task_id, None)
         self.team.pop(task_id, None)
@@ -328,6 +397,8 @@ class CellSim:
         if task is not None:
             events.append(Event(self.time, "interrupted", task, self._interrupt(task)))
         self.failed.add(robot_id)
+        if self.robot_spec[robot_id].kind in MOBILE_KINDS:
+            self.robot_site[robot_id] = ""
         return [*events, Event(self.time, "failed", "", (robot_id,))]
 
     def repair(self, robot_id: str) -> list[Event]:
@@ -371,6 +442,16 @@ class CellSim:
         body.velocity = (v * dx / d, v * dy / d)
         return False
 
+    def _pace(self, rid: str, job: _Job) -> float:
+        """The speed that brings ``rid`` to its slot when the plan says (plan_travel; at
+        most its own speed), else its own speed."""
+        speed = self.robot_spec[rid].speed
+        if rid not in job.due:
+            return speed
+        body = self.bodies[rid]
+        left = math.hypot(job.targets[rid][0] - body.position.x, job.targets[rid][1] - body.position.y)
+        return min(speed, left / max(job.due[rid] - self.time, self.cfg.dt))
+
     def step(self) -> list[Event]:
         """Advance the world by one dt; returns the tasks that finished."""
         dt = self.cfg.dt
@@ -385,17 +466,26 @@ class CellSim:
                 if job.timer <= 1e-9:
                     finished.append(tid)
             elif job.phase == "approach":
-                arrived = [self._drive(r, job.targets[r], self.robot_spec[r].speed, dt) for r in job.team]
+                arrived = [self._drive(r, job.targets[r], self._pace(r, job), dt)
+                           and self.time >= job.due.get(r, 0.0) - 1e-9 for r in job.team]
                 if all(arrived):
                     job.phase, job.timer = "load", self.cfg.handling_time
                     self.object_cell[spec.object] = None
+                    if self.cfg.plan_travel:
+                        self.start[tid] = self.time  # the task starts when the last member is there
             elif job.phase == "load":
                 job.timer -= dt
                 if job.timer <= 1e-9:
                     job.phase = "carry"
-                    job.targets = {r: self._slot(spec.cell, k, len(job.team)) for k, r in enumerate(job.team)}
+                    if self.cfg.plan_travel:  # each member moves by the object's move: the plan's distance
+                        dx, dy = np.subtract(self.cfg.cells[spec.cell].position, job.pickup)
+                        job.targets = {r: (self.position(r)[0] + dx, self.position(r)[1] + dy) for r in job.team}
+                    else:
+                        job.targets = {r: self._slot(spec.cell, k, len(job.team)) for k, r in enumerate(job.team)}
             elif job.phase == "carry":
                 speed = min(self.robot_spec[r].speed for r in job.team)
+                if self.cfg.plan_travel:  # the plan's duration: carried at nominal_speed
+                    speed = min(speed, self.cfg.nominal_speed)
                 arrived = [self._drive(r, job.targets[r], speed, dt) for r in job.team]
                 self.bodies[spec.object].velocity = self.bodies[job.team[0]].velocity
                 if all(arrived):
@@ -416,6 +506,8 @@ class CellSim:
             self.end[tid] = self.time
             for rid in job.team:
                 self.robot_task[rid] = None
+                if job.task.type == "transport":
+                    self.robot_site[rid] = job.task.cell
             out.append(Event(self.time, "finished", tid, job.team))
         if out:
             self._refresh_ready()
@@ -438,15 +530,26 @@ class CellSim:
             if task is not None:
                 busy = max(0.0, self.start[task] + self.inst.tasks[self.inst.task_index[task]].duration - self.time)
             x, y = self.position(r.id)
-            robots.append(RobotInfo(r.id, r.kind, task is None, caps, r.payload, task or "", busy, (x, y, 0.0)))
+            site, speed = "", 0.0
+            if self.cfg.plan_travel and self.share_travel:  # busy: where its task leaves it
+                site = self._task_spec[task].cell if task is not None else self.robot_site[r.id]
+                speed = r.speed if r.kind in MOBILE_KINDS else 0.0
+            robots.append(RobotInfo(r.id, r.kind, task is None, caps, r.payload, task or "", busy, (x, y, 0.0),
+                                    site, speed))
         return TeamSnapshot(self.time, self.cfg.capabilities, tuple(robots))
 
     def graph_snapshot(self) -> GraphSnapshot:
         tasks = []
-        for t in self.inst.tasks:
+        tr = self.inst.travel if self.share_travel else None
+        for j, t in enumerate(self.inst.tasks):
+            sites = ("", "") if tr is None else (tr.sites[tr.task_from[j]], tr.sites[tr.task_to[j]])
             tasks.append(TaskInfo(t.id, self.status[t.id], t.capabilities, t.payload, t.duration, t.after,
-                                  self.team.get(t.id, ()), self.start.get(t.id), self.end.get(t.id)))
-        return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks))
+                                  self.team.get(t.id, ()), self.start.get(t.id), self.end.get(t.id), *sites))
+        if tr is None:
+            return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks))
+        return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks),
+                             tuple((name, x, y) for name, (x, y) in zip(tr.sites, tr.coordinates, strict=True)),
+                             tuple(float(d) for d in tr.distance.reshape(-1)))
 
     # -- results ----------------------------------------------------------------------
     def executed_instance(self) -> Instance:
@@ -454,7 +557,7 @@ class CellSim:
         tasks = tuple(Task(t.id, t.capabilities, t.payload,
                            (self.end[t.id] - self.start[t.id]) if t.id in self.end else t.duration, t.after, t.extra)
                       for t in self.inst.tasks)
-        return Instance(self.inst.name, self.inst.capabilities, self.inst.robots, tasks)
+        return Instance(self.inst.name, self.inst.capabilities, self.inst.robots, tasks, travel=self.inst.travel)
 
     def schedule(self, policy: str, decisions: int = 0, compute: float = 0.0) -> Schedule:
         out = [Assignment(t, self.team[t], self.start[t], self.end[t]) for t in self.end]

@@ -240,3 +240,17 @@ def test_expert_demonstrations_on_a_travel_instance_label_the_departures():
         if fetch in tasks:
             chosen.append(bool((d.expert[:, tasks.index(fetch)] > 0).any()))
     assert any(chosen), "the expert's departure to fetch is labelled at no decision step"
+
+
+def test_a_robot_that_cannot_reach_a_task_does_not_wait_voluntarily_for_it():
+    from lvws_ros.core.executor import Decision, State, voluntary_waits
+
+    data = copy.deepcopy(CELL)
+    data["tasks"][1]["after"] = []  # "fit" at b, ready at once: only arm_b (fixed at b) can do it
+    data["robots"].append({"id": "arm_a", "capabilities": [1, 0], "payload": 1.0, "site": "a"})  # fixed at a
+    inst = instance_from_dict(data)
+    state = State.initial(inst)
+    fit, arm_a, arm_b = inst.task_index["fit"], inst.robot_index["arm_a"], inst.robot_index["arm_b"]
+    waits = voluntary_waits(state, Decision((), tuple(state.free_robots())))
+    assert fit in waits[arm_b]  # arm_b could start it now: a voluntary wait
+    assert fit not in waits.get(arm_a, ())  # arm_a can never get there: not voluntary

@@ -107,3 +107,24 @@ def test_resuming_on_the_optimal_path_keeps_the_optimum():
     opt = simulate(inst, make_policy("exact", workers=2), record_states=True)
     for rec in opt.steps[1::3]:
         assert solve_exact(inst, state=rec.state, workers=2).makespan == pytest.approx(opt.schedule.makespan)
+
+
+def test_the_exact_policy_replans_when_the_world_misses_a_planned_departure():
+    """Online, the world may run late (a robot arrives after the plan's time): a ready task
+    whose planned departure has passed is planned again from now, never left waiting."""
+    from dataclasses import replace
+
+    from lvws_ros.core.executor import State
+    from lvws_ros.policies.exact import ExactPolicy
+
+    inst = dataset_instance(DATASETS["IV"], 2000, seed=0)
+    policy = ExactPolicy(workers=2, time_limit=10)
+    policy.reset(inst)
+    first = policy.decide(State.initial(inst))
+    assert first.assignments
+    assert policy.result is not None and policy.result.schedule is not None
+    at = min(a.end for a in policy.result.schedule.assignments)  # a time the plan expects
+    late = replace(State.initial(inst), time=at)  # but nothing was started at 0: those departures missed
+    d = policy.decide(late)
+    assert d.assignments  # planned again from then, not left waiting for 0
+    assert all(abs(policy._leave.get(inst.tasks[j].id, at) - at) <= 1e-6 for j, _ in d.assignments)

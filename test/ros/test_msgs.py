@@ -106,3 +106,23 @@ def test_assignment_array_roundtrip():
     assert back.assignments[0].robot_ids == ["jackal_1", "husky_1"]
     assert back.decision_latency.nanosec == 1_500_000
     assert back.decision_step == 42 and back.policy == "grp"
+
+
+def test_travel_fields_cross_cdr_and_convert_back_to_the_same_snapshots():
+    """The travel extension of TaskGraph/TeamState (issue #15): sites, distances, task and
+    robot sites, speeds; the simulator's snapshots survive message conversion and CDR."""
+    from lvws_ros.core.online import build_instance
+    from lvws_ros.ros.convert import graph_from_msg, graph_to_msg, team_from_msg, team_to_msg
+    from lvws_ros.ros.resources import case_study_config
+    from lvws_ros.sim.config import load_cell_config
+    from lvws_ros.sim.world import CellSim
+
+    sim = CellSim(load_cell_config(case_study_config()))
+    graph, team = sim.graph_snapshot(), sim.team_snapshot()
+    assert graph.sites and graph.distances
+    g_back = graph_from_msg(roundtrip(graph_to_msg(graph)))
+    t_back = team_from_msg(roundtrip(team_to_msg(team)))
+    assert g_back == graph and t_back == team
+    assert build_instance(t_back, g_back).travel == build_instance(team, graph).travel
+    plain = TaskGraph(tasks=[make_task(1)])  # a graph without travel reads as zero travel
+    assert graph_from_msg(roundtrip(plain)).sites == () and graph_from_msg(plain).tasks[0].site_from == ""

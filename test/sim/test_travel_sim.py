@@ -1,0 +1,110 @@
+"""The case study planned with travel (issue #15): config/assembly_cell.yaml gives a
+travel-aware instance, the simulator executes a plan on time, the executed schedule is
+valid by the travel rules, and a cell without ``plan_travel`` is the paper's case study,
+unchanged."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from lvws_ros.core.executor import simulate
+from lvws_ros.core.online import build_instance, build_state, off_site
+from lvws_ros.core.schedule import check_schedule
+from lvws_ros.registry import make_policy
+from lvws_ros.ros.resources import case_study_config
+from lvws_ros.sim.config import load_cell_config
+from lvws_ros.sim.runner import compare_travel, run_offline
+from lvws_ros.sim.world import SLOT_RADIUS, CellSim, start_site
+
+CFG = load_cell_config(case_study_config())
+
+
+def test_the_shipped_cell_plans_with_travel():
+    assert CFG.plan_travel
+    inst = CellSim(CFG).inst
+    tr = inst.travel
+    assert tr is not None
+    assert set(tr.sites) == {*CFG.cells, *(start_site(r.id) for r in CFG.robots if r.kind != "panda")}
+    for k, r in enumerate(CFG.robots):
+        if r.kind == "panda":  # arms fixed at their cell
+            assert tr.robot_speed[k] == 0 and tr.sites[tr.robot_site[k]] == r.cell
+        else:
+            assert tr.robot_speed[k] == r.speed and tr.sites[tr.robot_site[k]] == start_site(r.id)
+    for j, t in enumerate(CFG.tasks):
+        assert tr.sites[tr.task_to[j]] == t.cell
+        assert tr.sites[tr.task_from[j]] == (t.source if t.type == "transport" else t.cell)
+    a, b = CFG.cells["cell_1"], CFG.cells["cell_2"]
+    d = float(np.hypot(*np.subtract(a.position, b.position)))
+    assert tr.distance[tr.sites.index("cell_1"), tr.sites.index("cell_2")] == pytest.approx(d + 2 * SLOT_RADIUS)
+
+
+def test_the_scheduler_sees_the_simulators_travel_through_the_snapshots():
+    sim = CellSim(CFG)
+    inst = build_instance(sim.team_snapshot(), sim.graph_snapshot())
+    assert inst.travel is not None
+    assert np.allclose(inst.travel.distance, sim.inst.travel.distance)
+    assert inst.travel.robot_speed == sim.inst.travel.robot_speed
+    assert (inst.travel.task_from, inst.travel.task_to) == (sim.inst.travel.task_from, sim.inst.travel.task_to)
+    state = build_state(inst, sim.team_snapshot(), sim.graph_snapshot())
+    assert list(state.robot_site) == list(sim.inst.travel.robot_site)
+
+
+def test_the_exact_plan_is_executed_on_time_and_no_policy_beats_it():
+    """Issue #15's targets on the case study: exact <= every other policy in the sim,
+    executed within 3 % of the exact plan, executed schedules valid by the travel rules."""
+    names = ["exact", "grp", "lvws", "rand_subteam"]
+    rows = {r.policy: r for r in compare_travel(CFG, [(n, lambda n=n: make_policy(n)) for n in names])}
+    exact = rows["exact"]
+    assert all(exact.executed <= r.executed + 1e-9 for r in rows.values())
+    assert abs(exact.plan_error) <= 0.03
+    assert exact.executed <= exact.blind  # planning with travel pays
+    for name in names:
+        sim = CellSim(CFG)
+        sched, _ = run_offline(sim, make_policy(name))
+        assert check_schedule(sim.executed_instance(), sched) == []  # rule 7 included
+
+
+def test_a_schedule_from_a_travel_blind_plan_is_rejected_by_rule_7():
+    sim = CellSim(CFG)
+    blind = simulate(replace(sim.inst, travel=None), make_policy("grp")).schedule
+    problems = check_schedule(sim.inst, blind)
+    assert problems and all(p.rule == 7 for p in problems)
+
+
+def test_a_cell_without_plan_travel_is_the_paper_case_study_unchanged():
+    cfg = replace(CFG, plan_travel=False)
+    sim = CellSim(cfg)
+    assert sim.inst.travel is None and not sim.graph_snapshot().sites
+    assert all(r.site == "" and r.speed == 0 for r in sim.team_snapshot().robots)
+    sched, _ = run_offline(sim, make_policy("grp"))
+    assert sched.makespan == pytest.approx(132.75)  # the figure of the issue, before travel
+
+
+def test_a_robot_stopped_between_sites_travels_from_where_it_is():
+    sim = CellSim(CFG)
+    online_policy = make_policy("grp")
+    while "t04" not in sim.jobs:  # until a mobile robot drives to obj2
+        team, graph = sim.team_snapshot(), sim.graph_snapshot()
+        inst = build_instance(team, graph)
+        d = online_policy.decide(build_state(inst, team, graph))
+        for j, robots in d.assignments:
+            sim.assign(inst.tasks[j].id, [inst.robots[r].id for r in robots])
+        for _ in range(20):
+            sim.step()
+    rid = sim.jobs["t04"].team[0]
+    for _ in range(10):
+        sim.step()
+    sim.fail(rid)
+    sim.repair(rid)
+    team = sim.team_snapshot()
+    robot = next(r for r in team.robots if r.id == rid)
+    assert robot.site == ""  # off every site
+    inst = build_instance(team, sim.graph_snapshot())
+    assert off_site(robot) in inst.travel.sites
+    k = inst.travel.sites.index(off_site(robot))
+    assert inst.travel.coordinates[k] == pytest.approx(sim.position(rid))
+    sched, _ = run_offline(sim, make_policy("grp"))
+    assert sim.done and check_schedule(sim.executed_instance(), sched) == []
