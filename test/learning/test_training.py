@@ -73,7 +73,7 @@ def choice_accuracy(model, demos_by_state):
 def test_tiny_model_learns(tmp_path):
     cfg = PipelineConfig(datasets=("I",), count=40, families=(), validation_per_dataset=8, dagger_rounds=1,
                          dagger_instances=8, dagger_epochs=1, processes=1,
-                         train=TrainConfig(epochs=6, batch_size=32, lr=3e-3, seed=0,
+                         train=TrainConfig(epochs=8, batch_size=32, lr=3e-3, seed=0,
                                            model=GATNConfig(hidden=32, mlp_hidden=32)))
     model, meta = run_pipeline(cfg, tmp_path / "tiny.pt", progress=False, log=lambda s: None)
     losses = [h["loss"] for h in meta["stages"][0]["history"]]
@@ -85,11 +85,13 @@ def test_tiny_model_learns(tmp_path):
     for inst in held_out:
         run = simulate(inst, ExactPolicy(workers=1), record_states=True)
         pairs += list(zip([s.state for s in run.steps], expert_demos(inst, workers=1), strict=True))
-    torch.manual_seed(0)
-    untrained = GATN(GATNConfig(hidden=32, mlp_hidden=32)).eval()
+    untrained = []
+    for seed in range(3):  # an untrained network's accuracy depends on its draw: their mean
+        torch.manual_seed(seed)
+        untrained.append(GATN(GATNConfig(hidden=32, mlp_hidden=32)).eval())
     held = [demo for _, demo in pairs]
-    assert evaluate_loss(model, held, cfg.train) < 0.9 * evaluate_loss(untrained, held, cfg.train)
-    assert choice_accuracy(model, pairs) >= choice_accuracy(untrained, pairs)
+    assert evaluate_loss(model, held, cfg.train) < 0.9 * evaluate_loss(untrained[0], held, cfg.train)
+    assert choice_accuracy(model, pairs) >= np.mean([choice_accuracy(u, pairs) for u in untrained])
     policy = LVWSPolicy(model_path=tmp_path / "tiny.pt")
     assert policy.idle_bias == meta["idle_bias"]
     for inst in held_out:
