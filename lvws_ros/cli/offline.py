@@ -219,7 +219,7 @@ def _add_evaluate(add: Adder) -> None:
             "policies x instances: mean makespan, suboptimality vs the exact solver, validity, decision time")
     p.add_argument("instances", nargs="*", help="instance files or folders")
     p.add_argument("--paper", action="store_true",
-                   help="regenerate the paper's Tables I and II on our datasets into --out-md")
+                   help="regenerate the paper's Tables I and II and our Table III (travel) on our datasets into --out-md")
     p.add_argument("--out-md", default="docs/results.md", help="with --paper: the markdown report")
     p.add_argument("--data-seed", type=int, default=0, help="with --paper: dataset seed")
     p.add_argument("--limit", type=int, default=None, help="with --paper: first LIMIT test instances per dataset")

@@ -121,3 +121,18 @@ def test_the_expert_cache_is_keyed_by_content_not_by_name(tmp_path):
     exact = make_policy("exact", workers=2)
     rows = summarize([run_policy(b, exact)], again)
     assert rows[0].proven == 1 and abs(rows[0].mean_suboptimality) < 1e-9
+
+
+def test_sim_compare_prints_plans_with_and_without_travel_and_refuses_a_bad_name(tmp_path):
+    res = lvws("sim", "--compare", "grp,exact")
+    rows = {line.split("|")[1].strip(): line for line in res.stdout.splitlines() if line.startswith("| ")}
+    assert {"grp", "exact"} <= set(rows)
+    plan, executed = (float(rows["exact"].split("|")[k]) for k in (2, 3))
+    assert abs(executed - plan) <= 0.03 * plan
+    bad = lvws("sim", "--compare", "grp,bogus", check=False)
+    assert bad.returncode == 2 and "bogus" in bad.stderr and "Traceback" not in bad.stderr
+    blind = tmp_path / "blind.yaml"
+    blind.write_text((REPO / "config" / "assembly_cell.yaml").read_text().replace("plan_travel: true",
+                                                                                   "plan_travel: false"))
+    res = lvws("sim", "--compare", "grp", "--config", blind, check=False)
+    assert res.returncode == 2 and "plan_travel" in res.stderr and "Traceback" not in res.stderr
