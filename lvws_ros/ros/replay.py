@@ -1,6 +1,9 @@
 """``lvws replay BAG [--rate X]``: republish a bag's messages on their topics with the
 recorded timing and QoS, like ``ros2 bag play``. Messages go out as the recorded CDR
-bytes (rclpy publishes serialized data), so nothing is re-encoded.
+bytes (rclpy publishes serialized data), so nothing is re-encoded, except a TeamState or
+TaskGraph recorded with an older definition of lvws_msgs (before the travel fields): it
+is read with the bag's own definition and converted to the current one (ros.convert),
+the new fields empty, as current nodes expect.
 """
 
 from __future__ import annotations
@@ -13,10 +16,11 @@ from typing import Any
 
 import rclpy
 from rclpy.utilities import remove_ros_args
-from rosbags.rosbag2 import Reader
+from rosbags.highlevel import AnyReader
 
 from lvws_ros.errors import BagError, LvwsError
-from lvws_ros.ros.bag import qos_from_bag
+from lvws_ros.ros.bag import LVWS_TYPES, qos_from_bag, typestore
+from lvws_ros.ros.convert import graph_from_msg, graph_to_msg, team_from_msg, team_to_msg
 from lvws_ros.ros.topics import message_class
 
 # Replay publishes faster than the recording at --rate > 1; a deeper history than the
@@ -46,8 +50,9 @@ def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[s
     node = rclpy.create_node("lvws_replay")
     sent: dict[str, int] = {}
     try:
-        with Reader(path) as reader:
+        with AnyReader([path], default_typestore=typestore()) as reader:
             conns = [c for c in reader.connections if topics is None or c.topic in topics]
+            convert = _converters(reader, conns, path)
             pubs = {c.id: node.create_publisher(message_class(c.msgtype), c.topic, qos_from_bag(c, REPLAY_MIN_DEPTH))
                     for c in conns}
             end = time.monotonic() + wait
@@ -61,7 +66,10 @@ def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[s
                 delay = (t_ns - t_bag0) / 1e9 / rate - (time.monotonic() - t_wall0)
                 if delay > 0:
                     time.sleep(delay)
-                pubs[conn.id].publish(bytes(raw))
+                if conn.msgtype in convert:
+                    pubs[conn.id].publish(convert[conn.msgtype](reader.deserialize(raw, conn.msgtype)))
+                else:
+                    pubs[conn.id].publish(bytes(raw))
                 sent[conn.topic] = sent.get(conn.topic, 0) + 1
             end = time.monotonic() + 0.5  # let reliable messages drain
             while time.monotonic() < end:
@@ -71,6 +79,33 @@ def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[s
         rclpy.try_shutdown()
     log(f"replayed {sum(sent.values())} messages: " + ", ".join(f"{k} {v}" for k, v in sorted(sent.items())))
     return sent
+
+
+_CONVERT = {
+    "lvws_msgs/msg/TeamState": lambda m: team_to_msg(team_from_msg(m), m.header.frame_id),
+    "lvws_msgs/msg/TaskGraph": lambda m: graph_to_msg(graph_from_msg(m), m.header.frame_id),
+}
+
+
+def _converters(reader: AnyReader, conns: list[Any], path: Path) -> dict[str, Any]:
+    """msgtype -> conversion, for the lvws_msgs topics recorded with a definition other
+    than the current one (BagError when such a type has no conversion)."""
+    if not any(c.msgtype.startswith("lvws_msgs/") for c in conns):
+        return {}
+    current = typestore().fielddefs
+    changed = {f"lvws_msgs/msg/{n}" for n in LVWS_TYPES
+               if f"lvws_msgs/msg/{n}" in reader.typestore.fielddefs
+               and reader.typestore.fielddefs[f"lvws_msgs/msg/{n}"] != current[f"lvws_msgs/msg/{n}"]}
+    if not changed:
+        return {}
+    out = {}
+    for c in conns:
+        if c.msgtype in _CONVERT:
+            out[c.msgtype] = _CONVERT[c.msgtype]
+        elif c.msgtype.startswith("lvws_msgs/") and c.msgtype in changed:
+            raise BagError(f"{path}: {c.topic} ({c.msgtype}) was recorded with another definition of the type; "
+                           "it cannot be replayed to current nodes")
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -295,6 +295,49 @@ def test_replay_republishes_every_message_of_the_reference_bag(ros_context):
     assert counts == expected, out
 
 
+BEFORE_TRAVEL_BAG = REPO / "test" / "data" / "bag-before-travel"  # recorded before the travel fields
+
+
+def test_a_bag_recorded_before_the_travel_fields_is_read_reported_and_replayed_to_current_nodes(ros_context):
+    """Its TeamState/TaskGraph have the older definitions: read with the bag's own types,
+    they convert to snapshots without travel, and replay converts them to the current
+    types, which current subscribers deserialize (the recorded bytes would not)."""
+    from lvws_ros.ros.bag import read_run
+
+    run = read_run(BEFORE_TRAVEL_BAG)
+    assert run.teams and run.graphs and all(r.site == "" for r in run.teams[0].robots)
+    assert not run.graphs[0].sites
+    expected = read_with_anyreader(BEFORE_TRAVEL_BAG)
+    node = rclpy.create_node("lvws_replay_old", context=ros_context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    got: dict[str, list] = {"/lvws/team_state": [], "/lvws/task_graph": []}
+    for topic in ("lvws/team_state", "lvws/task_graph"):
+        type_name, qos = TOPICS[topic]
+        sub_qos = QoSProfile(depth=2000, reliability=qos.reliability, durability=DurabilityPolicy.VOLATILE)
+        node.create_subscription(message_class(type_name), topic, got[f"/{topic}"].append, sub_qos)  # deserialized
+    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "replay", str(BEFORE_TRAVEL_BAG), "--rate", "5",
+                             "--wait-for-subscribers", "3", "--topics", *got], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        while proc.poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        end = time.monotonic() + 2
+        while any(len(got[t]) < expected[t] for t in got) and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        out = proc.communicate()[0]
+        node.destroy_node()
+    assert proc.returncode == 0, out
+    assert {t: len(v) for t, v in got.items()} == {t: expected[t] for t in got}, out
+    first = got["/lvws/team_state"][0]
+    assert [r.id for r in first.robots] == [r.id for r in run.teams[0].robots]
+    assert all(r.site == "" and r.speed == 0.0 for r in first.robots)
+
+
 def _gone(pids: dict[str, int]) -> bool:
     import os
 
