@@ -183,6 +183,9 @@ def _check_sites(snap: GraphSnapshot) -> None:
     names = [s[0] for s in snap.sites]
     if len(set(names)) != len(names) or "" in names:
         raise InstanceError("TaskGraph sites: ids must be unique and non-empty")
+    taken = [n for n in names if n.startswith("@")]
+    if taken:  # the sites of robots off every site (off_site)
+        raise InstanceError(f"TaskGraph sites: id {taken[0]!r} starts with '@', which names robots' own sites")
     for n, (name, x, y) in enumerate(snap.sites):
         _finite(x, f"TaskGraph sites[{n}] ({name!r}).x", low=-MAX_VALUE)
         _finite(y, f"TaskGraph sites[{n}] ({name!r}).y", low=-MAX_VALUE)
@@ -226,23 +229,37 @@ def off_site(robot: RobotInfo) -> str:
     return f"@{robot.id}"
 
 
+def robot_site(robot: RobotInfo, known: set[str] | frozenset[str], n: int = 0) -> str:
+    """The site a robot of a snapshot with travel is at: the one it names, or, for a mobile
+    robot off every site (site ""), one of its own at its pose (:func:`off_site`).
+    InstanceError naming the field for an unknown site or a fixed robot without one."""
+    if robot.site in known:
+        return robot.site
+    where = f"TeamState robots[{n}] ({robot.id!r}).site"
+    if robot.site:
+        raise InstanceError(f"{where}: unknown site {robot.site!r} (the TaskGraph's sites: "
+                            f"{', '.join(sorted(known)[:10])})")
+    if robot.speed <= 0:
+        raise InstanceError(f"{where}: empty for a fixed robot (speed 0), but the TaskGraph has sites: a fixed "
+                            "robot needs its site (a TeamState without travel fields cannot serve a graph with sites)")
+    return off_site(robot)
+
+
 def snapshot_travel(team: TeamSnapshot, graph: GraphSnapshot) -> Travel:
     """The travel of the snapshots: the graph's sites (plus one at the pose of each mobile
     robot off every site), each robot at its site, each task at its sites."""
-    known = {s[0] for s in graph.sites}
+    known = frozenset(s[0] for s in graph.sites)
     sites = {name: (x, y) for name, x, y in graph.sites}
-    extra = [r for r in team.robots if r.site not in known]
-    for r in extra:
-        if r.speed == 0 and r.site:
-            raise InstanceError(f"TeamState robot {r.id!r}.site: unknown site {r.site!r} for a fixed robot")
-        sites[off_site(r)] = (r.pose[0], r.pose[1])
+    at = [robot_site(r, known, n) for n, r in enumerate(team.robots)]
+    for r, name in zip(team.robots, at, strict=True):
+        if name not in known:
+            sites[name] = (r.pose[0], r.pose[1])
     names = [s[0] for s in graph.sites]
     distances: dict[str, dict[str, float]] = {}
     if graph.distances:
         for a, name in enumerate(names):
             distances[name] = {b: graph.distances[a * len(names) + k] for k, b in enumerate(names) if b != name}
-    robots = [(r.id, r.site if r.site in known else off_site(r), r.speed if r.speed > 0 else None)
-              for r in team.robots]
+    robots = [(r.id, name, r.speed if r.speed > 0 else None) for r, name in zip(team.robots, at, strict=True)]
     tasks = [(t.id, t.site_from, t.site_to or t.site_from) for t in graph.tasks]
     return build_travel(sites, distances, robots, tasks)
 
@@ -250,21 +267,32 @@ def snapshot_travel(team: TeamSnapshot, graph: GraphSnapshot) -> Travel:
 def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot, dict[str, str]]:
     """The part of ``graph`` the robots of ``team`` can schedule, and the tasks held back
     (id -> why). A task the whole present team cannot cover (Eqs. 10-11: robots failed or
-    gone) is held back with every task waiting on it, until the team can cover it again; a
-    DONE task it cannot cover any more is left out and dropped from its dependents'
+    gone; with travel, the robots that can reach it) is held back with every task waiting
+    on it, until the team can cover it again; a DONE task it cannot cover any more is left out and dropped from its dependents'
     prerequisites (they are satisfied). The rest is scheduled as usual."""
     k = len(graph.capability_names)
     vectors = [r.capabilities for r in team.robots] + [t.capabilities for t in graph.tasks]
     if not graph.tasks or any(len(v) != k for v in vectors):
         return graph, {}  # nothing to hold back, or malformed: build_instance says what is wrong
-    team_caps = np.array([r.capabilities for r in team.robots], dtype=bool).reshape(-1, k).any(axis=0)
-    team_payload = float(sum(r.payload for r in team.robots))
+    caps = np.array([r.capabilities for r in team.robots], dtype=bool).reshape(-1, k)
+    payloads = np.array([r.payload for r in team.robots], dtype=np.float64)
+    team_caps: np.ndarray = np.asarray(caps.any(axis=0))
+    team_payload: np.ndarray | float = float(payloads.sum())
+    if graph.sites:  # with travel, per task only the robots that can reach it at all
+        try:
+            tr = snapshot_travel(team, graph)
+        except InstanceError:
+            return graph, {}  # build_instance says what is wrong
+        n, m = len(team.robots), len(graph.tasks)
+        able = np.isfinite(tr.arrivals(range(n), tr.robot_site, range(m))).astype(np.float64)  # (N, M)
+        team_caps, team_payload = np.asarray(able.T @ caps.astype(np.float64) > 0), able.T @ payloads
     need = np.array([t.capabilities for t in graph.tasks], dtype=bool).reshape(-1, k)
     ok = covered(team_caps, team_payload, need, np.array([t.payload for t in graph.tasks], dtype=np.float64))
     if ok.all():
         return graph, {}
     done_gone = {t.id for t, c in zip(graph.tasks, ok, strict=True) if not c and t.status == TaskStatus.DONE}
-    held = {t.id: "the robots present cannot cover it" for t, c in zip(graph.tasks, ok, strict=True)
+    held = {t.id: "the robots present cannot cover it" + (" (those that can reach it)" if graph.sites else "")
+            for t, c in zip(graph.tasks, ok, strict=True)
             if not c and t.status != TaskStatus.DONE}
     children: dict[str, list[str]] = {}
     for t in graph.tasks:
@@ -321,16 +349,25 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
             busy = float(r.busy_for) if math.isfinite(r.busy_for) else unknown_busy
             free_at[i] = now + max(busy, BUSY_EPS)
     start = np.full(m, np.nan)
+    own = _own_sites(inst, team)
     for j, t in enumerate(graph.tasks):
         if status[j] == TaskStatus.ASSIGNED:
             idx = list(teams[j])
             busy_until = [free_at[i] for i in idx if free_at[i] > now]
-            end = max(busy_until) if busy_until else now + inst.durations[j]  # just assigned, or unacknowledged
+            # just assigned, or unacknowledged: the subteam travels first (travel extension)
+            tr = inst.travel
+            go = tr.arrival(idx, [int(own[i]) for i in idx], j) if tr is not None and own is not None else 0.0
+            end = max(busy_until) if busy_until else now + go + inst.durations[j]
             free_at[idx] = np.maximum(free_at[idx], end)
             start[j] = end - inst.durations[j]
         elif status[j] == TaskStatus.DONE:
             start[j] = t.start if t.start is not None else now - inst.durations[j]
     return State(inst, now, free_at, status, start, teams, robot_site=_robot_sites(inst, team, status, teams))
+
+
+def _own_sites(inst: Instance, team: TeamSnapshot) -> np.ndarray | None:
+    """Where each robot says it is (no task counted)."""
+    return _robot_sites(inst, team, np.zeros(inst.num_tasks, dtype=np.int8), [()] * inst.num_tasks)
 
 
 def _robot_sites(inst: Instance, team: TeamSnapshot, status: np.ndarray,
@@ -341,7 +378,8 @@ def _robot_sites(inst: Instance, team: TeamSnapshot, status: np.ndarray,
     if tr is None:
         return None
     index = {name: k for k, name in enumerate(tr.sites)}
-    site = np.array([index.get(r.site, index.get(off_site(r), tr.robot_site[i])) for i, r in enumerate(team.robots)],
+    known = frozenset(index)
+    site = np.array([index.get(robot_site(r, known, n), tr.robot_site[n]) for n, r in enumerate(team.robots)],
                     dtype=np.int64)
     for j in np.flatnonzero(status == TaskStatus.ASSIGNED):
         site[list(teams[int(j)])] = tr.task_to[int(j)]
@@ -368,7 +406,9 @@ def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:
             # travel: the sites, speeds and task sites; where a robot is only when it is off
             # every site (a new site at its pose); the state follows the robots (build_state)
             graph.sites, graph.distances, tuple((t.site_from, t.site_to) for t in graph.tasks),
-            tuple((r.speed, r.pose[:2] if graph.sites and r.site not in known else None) for r in team.robots))
+            tuple((r.speed, bool(graph.sites) and r.site not in known,  # off every site: a site of its own,
+                   r.pose[:2] if graph.sites and r.site not in known  # at its pose while it stands free
+                   and r.available and not r.current_task else None) for r in team.robots))
 
 
 class OnlineScheduler:

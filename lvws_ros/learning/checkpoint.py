@@ -43,7 +43,7 @@ def load_checkpoint(path: str | Path) -> tuple[GATN, dict[str, Any]]:
     try:
         model = GATN(GATNConfig.from_dict(data["config"]))
         model.load_state_dict(data["state_dict"])
-    except (KeyError, TypeError, RuntimeError) as exc:
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise ModelError(f"{path}: checkpoint does not match the network ({type(exc).__name__}: {exc})") from None
     model.eval()
     return model, data.get("meta", {})

@@ -33,6 +33,7 @@ from lvws_ros.core.problem import Instance
 from lvws_ros.errors import ConfigError, ModelError
 from lvws_ros.learning.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from lvws_ros.learning.demonstrations import DEMOS_FORMAT, Demo, dagger_demos, label_instances, load_demos, save_demos
+from lvws_ros.learning.features import PAIR_FEATURES
 from lvws_ros.learning.gatn import GATN, GATNConfig
 from lvws_ros.learning.loss import batch_tensors, imitation_loss, wait_targets
 from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, DBGMPolicy, LVWSPolicy
@@ -316,6 +317,15 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
             grown.load_state_dict(start.state_dict(), strict=False)
             start = grown
             log(f"{init}: a wait head added")
+        if start.cfg.pair_features < PAIR_FEATURES:  # a lvws-gatn/2 model: learn to read the travel features
+            wider = GATN(replace(start.cfg, pair_features=PAIR_FEATURES))
+            state = start.state_dict()
+            old_w = state["psi_p.weight"]
+            state["psi_p.weight"] = torch.cat([old_w, old_w.new_zeros(old_w.shape[0], PAIR_FEATURES - old_w.shape[1])],
+                                              dim=1)  # the new columns start at zero: the same outputs at first
+            wider.load_state_dict(state)
+            start = wider
+            log(f"{init}: reads the travel pair features from now on (lvws-gatn/3)")
         tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
         log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")
     demos: list[Demo] = []

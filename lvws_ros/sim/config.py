@@ -17,7 +17,7 @@ import yaml
 from lvws_ros.errors import ConfigError
 
 __all__ = ["ARM_KINDS", "MOBILE_KINDS", "PART_PAYLOAD", "CellConfig", "CellSpec", "ObjectSpec", "RobotSpec", "TaskSpec",
-           "load_cell_config", "parse_task", "read_yaml"]
+           "load_cell_config", "parse_task", "read_yaml", "start_site"]
 
 ARM_KINDS = ("panda",)
 PART_PAYLOAD = 0.1  # an assembly's part when its entry names none
@@ -77,6 +77,11 @@ class CellConfig:
     # the mobile robots' start points as sites; robots arrive when the plan says; transports
     # carry at nominal_speed. False (a file without the key): no travel in the plan, as before.
     plan_travel: bool = False
+
+
+def start_site(robot_id: str) -> str:
+    """The site where a mobile robot starts (the travel plan, ``plan_travel``)."""
+    return f"{robot_id}_start"
 
 
 def _num(value: Any, what: str, *, positive: bool = True) -> float:
@@ -170,6 +175,15 @@ def _parse_config(d: dict[str, Any]) -> CellConfig:
             raise ConfigError(f"object {o['id']}: unknown cell {o['cell']!r}")
         objects[str(o["id"])] = ObjectSpec(str(o["id"]), _num(o["weight"], f"object {o['id']} weight"), str(o["cell"]))
     tasks = tuple(parse_task(t, cells, objects) for t in d["tasks"])
+    plan_travel = _flag(d.get("plan_travel", False), "plan_travel")
+    if plan_travel:  # the plan's sites: cells and start points; transports carry at nominal_speed
+        nominal = _num(d.get("nominal_speed", 0.8), "nominal_speed")
+        for r in robots:
+            if r.kind in MOBILE_KINDS and r.speed < nominal:
+                raise ConfigError(f"robot {r.id} speed: {r.speed:g} is below nominal_speed {nominal:g}, at which "
+                                  "transports carry in the plan (plan_travel)")
+            if start_site(r.id) in cells:
+                raise ConfigError(f"cell {start_site(r.id)}: the name of robot {r.id}'s start site (plan_travel)")
     caps = tuple(str(c) for c in d["capabilities"])
     for needed in ("manipulation", "mobility", *(f"@{c}" for c in cells)):
         if needed not in caps:
@@ -180,8 +194,7 @@ def _parse_config(d: dict[str, Any]) -> CellConfig:
                                                                   positive=False),
         arrive_tolerance=_num(sim.get("arrive_tolerance", 0.05), "sim.arrive_tolerance"),
         nominal_speed=_num(d.get("nominal_speed", 0.8), "nominal_speed"),
-        cells=cells, robots=robots, objects=objects, tasks=tasks, plan_travel=_flag(d.get("plan_travel", False),
-                                                                                 "plan_travel"))
+        cells=cells, robots=robots, objects=objects, tasks=tasks, plan_travel=plan_travel)
 
 
 def _flag(value: Any, what: str) -> bool:

@@ -46,7 +46,7 @@ from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import shortfall
 from lvws_ros.core.travel import Travel, build_travel
 from lvws_ros.errors import AssignmentRejected, ConfigError, WorldEventRejected
-from lvws_ros.sim.config import ARM_KINDS, MOBILE_KINDS, CellConfig, RobotSpec, TaskSpec, parse_task
+from lvws_ros.sim.config import ARM_KINDS, MOBILE_KINDS, CellConfig, RobotSpec, TaskSpec, parse_task, start_site
 
 __all__ = ["CellSim", "Event", "Frame", "build_instance"]
 
@@ -59,11 +59,6 @@ def _dist(a: Sequence[float], b: Sequence[float]) -> float:
 
 
 SLOT_RADIUS = 0.8  # members stand this far from the object they work on (_slot)
-
-
-def start_site(robot_id: str) -> str:
-    """The site where a mobile robot starts (the travel plan, ``plan_travel``)."""
-    return f"{robot_id}_start"
 
 
 def _travel(cfg: CellConfig) -> Travel:

@@ -129,3 +129,30 @@ def test_demonstrations_written_before_the_travel_features_read_with_zero_travel
     for d in travel:  # X: only robots that can reach a task
         assert d.mask.shape == d.expert.shape
         assert not (d.expert > 0)[~d.mask].any()
+
+
+def test_fine_tuning_a_model_without_travel_features_teaches_it_to_read_them(tmp_path):
+    from lvws_ros.learning.checkpoint import save_checkpoint
+    from lvws_ros.learning.training import PipelineConfig, TrainConfig, run_pipeline
+
+    old = GATN(GATNConfig(hidden=16, mlp_hidden=16, pair_features=LEGACY_PAIR_FEATURES))
+    save_checkpoint(tmp_path / "old.pt", old, {"kind": "lvws", "idle_bias": 0.0})
+    cfg = PipelineConfig(datasets=("IV",), count=6, families=(), validation_per_dataset=2, dagger_rounds=0,
+                         processes=1, label_time_limit=2, train=TrainConfig(epochs=1, batch_size=16, seed=0))
+    logs: list[str] = []
+    model, _ = run_pipeline(cfg, tmp_path / "new.pt", init=tmp_path / "old.pt", progress=False, log=logs.append)
+    assert model.cfg.pair_features == PAIR_FEATURES and any("travel pair features" in line for line in logs)
+    assert load_checkpoint(tmp_path / "new.pt")[0].cfg.pair_features == PAIR_FEATURES
+
+
+def test_a_checkpoint_asking_for_more_pair_features_than_exist_is_refused(tmp_path):
+    from lvws_ros.errors import ModelError
+    from lvws_ros.learning.checkpoint import save_checkpoint
+
+    model = GATN(GATNConfig(hidden=16, mlp_hidden=16))
+    save_checkpoint(tmp_path / "m.pt", model, {})
+    data = torch.load(tmp_path / "m.pt", weights_only=True)
+    data["config"]["pair_features"] = PAIR_FEATURES + 2
+    torch.save(data, tmp_path / "m.pt")
+    with pytest.raises(ModelError, match="does not match the network"):
+        load_checkpoint(tmp_path / "m.pt")

@@ -10,14 +10,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from conftest import REPO
 from lvws_ros.core.executor import simulate
 from lvws_ros.core.online import build_instance, build_state, off_site
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.registry import make_policy
 from lvws_ros.ros.resources import case_study_config
-from lvws_ros.sim.config import load_cell_config
+from lvws_ros.sim.config import load_cell_config, start_site
 from lvws_ros.sim.runner import compare_travel, run_offline
-from lvws_ros.sim.world import SLOT_RADIUS, CellSim, start_site
+from lvws_ros.sim.world import SLOT_RADIUS, CellSim
 
 CFG = load_cell_config(case_study_config())
 
@@ -108,3 +109,71 @@ def test_a_robot_stopped_between_sites_travels_from_where_it_is():
     assert inst.travel.coordinates[k] == pytest.approx(sim.position(rid))
     sched, _ = run_offline(sim, make_policy("grp"))
     assert sim.done and check_schedule(sim.executed_instance(), sched) == []
+
+
+def test_snapshots_with_bad_travel_are_refused_naming_the_field():
+    from lvws_ros.core.online import check_graph
+    from lvws_ros.errors import InstanceError
+
+    sim = CellSim(CFG)
+    team, graph = sim.team_snapshot(), sim.graph_snapshot()
+    blind = replace(team, robots=tuple(replace(r, site="", speed=0.0) for r in team.robots))  # no travel fields
+    with pytest.raises(InstanceError, match=r"robots\[0\] \('panda_1'\)\.site: empty for a fixed robot"):
+        build_instance(blind, graph)
+    lost = replace(team, robots=(replace(team.robots[0], site="nowhere"), *team.robots[1:]))
+    with pytest.raises(InstanceError, match="unknown site 'nowhere'"):
+        build_instance(lost, graph)
+    with pytest.raises(InstanceError, match="starts with '@'"):
+        check_graph(replace(graph, sites=(*graph.sites, ("@jackal_1", 0.0, 0.0))))
+    with pytest.raises(InstanceError, match="site_distances"):
+        check_graph(replace(graph, distances=graph.distances[:-1]))
+
+
+def test_a_task_no_robot_can_reach_is_held_back_with_its_dependents():
+    from lvws_ros.core.online import schedulable
+
+    sim = CellSim(CFG)
+    team, graph = sim.team_snapshot(), sim.graph_snapshot()
+    # panda_3 (the arm at cell_3) gone; panda_1 holds every capability cell_3's tasks need,
+    # but it is fixed at cell_1: without travel it would cover them, with travel nobody can
+    c3 = CFG.capabilities.index("@cell_3")
+    p1 = team.robots[0]
+    assert p1.id == "panda_1"
+    caps = tuple(1 if k == c3 else c for k, c in enumerate(p1.capabilities))
+    without = replace(team, robots=(replace(p1, capabilities=caps, payload=1.0),
+                                    *(r for r in team.robots[1:] if r.id != "panda_3")))
+    assert schedulable(without, replace(graph, sites=(), distances=()))[1] == {}  # travel-blind: coverable
+    view, held = schedulable(without, graph)
+    assert {"t03", "t13", "t14"} <= set(held) and "t06" in held  # t06 waits on t03
+    assert "(those that can reach it)" in held["t03"]
+    assert {t.id for t in view.tasks} == {t.id for t in graph.tasks} - set(held)
+
+
+def test_an_unacknowledged_assignment_counts_its_travel():
+    sim = CellSim(CFG)
+    team, graph = sim.team_snapshot(), sim.graph_snapshot()
+    inst = build_instance(team, graph)
+    ready = replace(graph, tasks=tuple(replace(t, status=1, prerequisites=()) if t.id == "t04" else t
+                                       for t in graph.tasks))
+    state = build_state(inst, team, ready, {"t04": ("jackal_2",)})
+    j, r = inst.task_index["t04"], inst.robot_index["jackal_2"]
+    go = inst.travel.arrival([r], [inst.travel.robot_site[r]], j)
+    assert go > 0
+    assert state.task_start[j] == pytest.approx(go)  # it starts when jackal_2 is there
+    assert state.robot_free_at[r] == pytest.approx(go + inst.durations[j])
+    assert state.robot_site[r] == inst.travel.task_to[j]
+
+
+def test_a_cell_planning_with_travel_refuses_what_the_plan_cannot_keep(tmp_path):
+    from lvws_ros.errors import ConfigError
+
+    text = (REPO / "config" / "assembly_cell.yaml").read_text()
+    slow = tmp_path / "slow.yaml"
+    slow.write_text(text.replace("husky, start: [8.0, 3.0], payload: 6.0, speed: 0.8",
+                                 "husky, start: [8.0, 3.0], payload: 6.0, speed: 0.5"))
+    with pytest.raises(ConfigError, match=r"husky_1 speed: 0\.5 is below nominal_speed 0\.8"):
+        load_cell_config(slow)
+    clash = tmp_path / "clash.yaml"
+    clash.write_text(text.replace("cell_3", "jackal_1_start"))  # a cell named like a start site
+    with pytest.raises(ConfigError, match="jackal_1_start: the name of robot jackal_1's start site"):
+        load_cell_config(clash)
