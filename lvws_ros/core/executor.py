@@ -119,6 +119,11 @@ class State:
             return np.zeros((np.size(robots), np.size(tasks)))
         return tr.arrivals(robots, self.robot_site[np.asarray(robots, dtype=np.int64)], tasks)
 
+    def reachable(self, robots: npt.ArrayLike, tasks: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """(len(robots), len(tasks)): which robot can reach which task at all (all True
+        without travel; a fixed robot only tasks at its site that do not move it)."""
+        return np.isfinite(self.arrivals(robots, tasks))
+
     def start(self, task: int, team: Sequence[int]) -> None:
         """The subteam is busy from now: it travels to the task (travel extension), which
         starts when its slowest member is there."""
@@ -231,7 +236,7 @@ def voluntary_waits(state: State, decision: Decision) -> dict[int, tuple[int, ..
     if not left:
         return {}
     ready = [j for j in state.ready_tasks() if j not in started]
-    reach = np.isfinite(state.arrivals(left, ready))  # with travel, only robots that can reach a task
+    reach = state.reachable(left, ready)
     for c, j in enumerate(ready):
         able = [r for r, ok in zip(left, reach[:, c], strict=True) if ok]
         caps, payloads = inst.robot_caps[able], inst.robot_payload[able]

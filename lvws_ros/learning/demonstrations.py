@@ -83,7 +83,7 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA) -> tuple
     x = feasibility_mask(inst.robot_caps, inst.task_caps, inst.robot_payload, inst.task_payload)
     x[:, :m] &= ready[None, :]
     if inst.travel is not None:  # with travel, only robots that can reach the task at all
-        x[:, :m] &= np.isfinite(state.arrivals(range(n), range(m)))
+        x[:, :m] &= state.reachable(range(n), range(m))
     x &= free[:, None]
     return e, x
 

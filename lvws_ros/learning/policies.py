@@ -40,7 +40,7 @@ NO_VOLUNTARY_WAIT = -1e6  # idle bias that leaves waiting only to robots with no
 def reachable(state: State, robots: Sequence[int], tasks: Sequence[int]) -> np.ndarray | None:
     """(robots, tasks): the pairs the matching may use, with travel the robots that can
     reach a task at all (a fixed robot only at its site); None without travel (all)."""
-    return None if state.instance.travel is None else np.isfinite(state.arrivals(robots, tasks))
+    return None if state.instance.travel is None else state.reachable(robots, tasks)
 
 
 def _idle_last(sub: np.ndarray) -> None:

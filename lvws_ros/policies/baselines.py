@@ -49,7 +49,7 @@ class _SequentialPolicy:
     @staticmethod
     def arrivals(state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
         """Seconds each free robot needs to reach ``task`` (zeros without travel)."""
-        return np.array([state.arrival(task, [int(r)]) for r in free], dtype=np.float64)
+        return state.arrivals(free, [task])[:, 0]
 
     def pick_reachable(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
                        arrival: FloatArray) -> tuple[int, ...] | None:
