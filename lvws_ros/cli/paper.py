@@ -89,7 +89,9 @@ def _header(meta: dict[str, Any], seconds: float, data_seed: int, policy_seed: i
         f"Models: `lvws_ros/learning/models/lvws.pt` (trained on the training splits of datasets "
         f"{meta['lvws'].get('datasets')} and families {meta['lvws'].get('families')}, data seed "
         f"{meta['lvws'].get('data_seed')}, training seed {meta['lvws'].get('training_seed')}, idle bias "
-        f"{meta['lvws'].get('idle_bias')}), `lvws_ros/learning/models/dbgm.pt` (same data, GAT only). No test "
+        f"{meta['lvws'].get('idle_bias')}), `lvws_ros/learning/models/dbgm.pt` (GAT only, datasets "
+        f"{meta['dbgm'].get('datasets')} and families {meta['dbgm'].get('families')}, lvws-gatn/2: no travel "
+        "features). No test "
         "instance and no held-out family was used in training or model selection."
         + (f" Each test set: its first {limit} instances." if limit else ""),
         "Our instances follow the paper's recipe but not its (unpublished) generator, so absolute "
