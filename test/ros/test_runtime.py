@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 import rclpy
@@ -276,23 +277,30 @@ def test_replay_republishes_every_message_of_the_reference_bag(ros_context):
         node.create_subscription(message_class(type_name), topic,
                                  lambda _m, t=f"/{topic}": counts.__setitem__(t, counts.get(t, 0) + 1), sub_qos,
                                  raw=True)
-    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "replay", str(REFERENCE_BAG), "--rate", "5",
-                             "--wait-for-subscribers", "3"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
+    proc, out = _replay(REFERENCE_BAG, [], executor, node, lambda: counts == expected)
+    assert proc.returncode == 0, out
+    assert counts == expected, out
+
+
+def _replay(bag: Path, extra: list[str], executor: Any, node: Any, done: Any) -> tuple[subprocess.Popen, str]:
+    """Run ``lvws replay BAG`` at 5x while spinning ``executor`` until it ends and, for up
+    to 2 s more, until ``done()``; the process and its output (``node`` is destroyed)."""
+    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "replay", str(bag), "--rate", "5",
+                             "--wait-for-subscribers", "3", *extra], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 90
         while proc.poll() is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         end = time.monotonic() + 2
-        while counts != expected and time.monotonic() < end:
+        while not done() and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
     finally:
         if proc.poll() is None:
             proc.kill()
         out = proc.communicate()[0]
         node.destroy_node()
-    assert proc.returncode == 0, out
-    assert counts == expected, out
+    return proc, out
 
 
 BEFORE_TRAVEL_BAG = REPO / "test" / "data" / "bag-before-travel"  # recorded before the travel fields
@@ -316,21 +324,8 @@ def test_a_bag_recorded_before_the_travel_fields_is_read_reported_and_replayed_t
         type_name, qos = TOPICS[topic]
         sub_qos = QoSProfile(depth=2000, reliability=qos.reliability, durability=DurabilityPolicy.VOLATILE)
         node.create_subscription(message_class(type_name), topic, got[f"/{topic}"].append, sub_qos)  # deserialized
-    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "replay", str(BEFORE_TRAVEL_BAG), "--rate", "5",
-                             "--wait-for-subscribers", "3", "--topics", *got], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
-    try:
-        deadline = time.monotonic() + 90
-        while proc.poll() is None and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-        end = time.monotonic() + 2
-        while any(len(got[t]) < expected[t] for t in got) and time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        out = proc.communicate()[0]
-        node.destroy_node()
+    proc, out = _replay(BEFORE_TRAVEL_BAG, ["--topics", *got], executor, node,
+                        lambda: all(len(got[t]) >= expected[t] for t in got))
     assert proc.returncode == 0, out
     assert {t: len(v) for t, v in got.items()} == {t: expected[t] for t in got}, out
     first = got["/lvws/team_state"][0]
