@@ -13,6 +13,7 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
@@ -45,6 +46,12 @@ def node_main(prog: str, argv: list[str] | None, parser: argparse.ArgumentParser
     try:
         return run(node)
     except (KeyboardInterrupt, ExternalShutdownException):
+        return interrupted
+    except RCLError:
+        if rclpy.ok():
+            raise
+        # a signal shut the context down while the executor was making its wait set (an
+        # rclpy race under load): the same as ExternalShutdownException
         return interrupted
     finally:
         node.destroy_node()

@@ -60,7 +60,7 @@ def test_the_services_change_a_running_namespaced_cell(tmp_path: Path):
     domain = str(random.SystemRandom().randint(1, 101))
     cell = ["--namespace", "cellS", "--domain-id", domain]
     tasks = tmp_path / "more.yaml"
-    tasks.write_text("- {id: t15, type: assembly, object: obj3, cell: cell_1, duration: 3.0}\n")
+    tasks.write_text("- {id: t15, type: assembly, object: obj1, cell: cell_3, duration: 3.0, after: [t14]}\n")
     run = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "launch", *cell, "--policy", "grp", "--rate", "4",
                             "--no-gif", "--name", "svc", "--bag-dir", str(tmp_path / "bags"), "--out-dir",
                             str(tmp_path / "out"), "--timeout", "300"], stdout=subprocess.PIPE,
