@@ -201,9 +201,15 @@ class CellSim:
         """Where member k of n stands to pick up an object at ``at``: where it is if it is
         at that spot already (a robot that brought something there works on from where it
         stands, no move, as the plan's zero travel says), else its slot."""
+        if not self.cfg.plan_travel:
+            return self._slot(at, k, n)
         here = self.position(rid)
-        near = _dist(here, at) <= SLOT_RADIUS + self.cfg.arrive_tolerance
-        return here if self.cfg.plan_travel and near else self._slot(at, k, n)
+        if _dist(here, at) <= SLOT_RADIUS + self.cfg.arrive_tolerance:
+            return here
+        # its own place around any object (the mobile robots spread evenly), so robots
+        # that stay where they stand never share one
+        mobile = [r.id for r in self.cfg.robots if r.kind in MOBILE_KINDS]
+        return self._slot(at, mobile.index(rid), len(mobile))
 
     # -- state ------------------------------------------------------------------------
     @property

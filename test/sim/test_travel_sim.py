@@ -177,3 +177,21 @@ def test_a_cell_planning_with_travel_refuses_what_the_plan_cannot_keep(tmp_path)
     clash.write_text(text.replace("cell_3", "jackal_1_start"))  # a cell named like a start site
     with pytest.raises(ConfigError, match="jackal_1_start: the name of robot jackal_1's start site"):
         load_cell_config(clash)
+
+
+def test_members_of_a_subteam_never_stand_on_one_spot():
+    """Each mobile robot has its own place around an object and a robot at the object
+    stays where it stands, so members that come from two solo transports do not merge."""
+    sim = CellSim(CFG)
+    run_offline(sim, make_policy("grp"), frame_every=0.5)
+    together = 0
+    for frame in sim.trace:
+        teams: dict[str, list[str]] = {}
+        for rid, task in frame.robot_task.items():
+            if task is not None:
+                teams.setdefault(task, []).append(rid)
+        for members in teams.values():
+            for a, b in ((a, b) for i, a in enumerate(members) for b in members[i + 1:]):
+                together += 1
+                assert np.hypot(*np.subtract(frame.positions[a], frame.positions[b])) > 0.5, (frame.time, a, b)
+    assert together > 0  # t10 is carried by two robots
