@@ -204,8 +204,11 @@ class CellSim:
         if not self.cfg.plan_travel:
             return self._slot(at, k, n)
         here = self.position(rid)
-        if _dist(here, at) <= SLOT_RADIUS + self.cfg.arrive_tolerance:
+        gap = _dist(here, at)
+        if gap <= SLOT_RADIUS + self.cfg.arrive_tolerance:
             return here
+        if not self.robot_site[rid]:  # off every site: the plan drives it straight, so stop short on that line
+            return (at[0] + (here[0] - at[0]) * SLOT_RADIUS / gap, at[1] + (here[1] - at[1]) * SLOT_RADIUS / gap)
         # its own place around any object (the mobile robots spread evenly), so robots
         # that stay where they stand never share one
         mobile = [r.id for r in self.cfg.robots if r.kind in MOBILE_KINDS]

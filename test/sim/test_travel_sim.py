@@ -18,7 +18,7 @@ from lvws_ros.registry import make_policy
 from lvws_ros.ros.resources import case_study_config
 from lvws_ros.sim.config import load_cell_config, start_site
 from lvws_ros.sim.runner import compare_travel, run_offline
-from lvws_ros.sim.world import SLOT_RADIUS, CellSim
+from lvws_ros.sim.world import DONE, SLOT_RADIUS, CellSim
 
 CFG = load_cell_config(case_study_config())
 
@@ -195,3 +195,24 @@ def test_members_of_a_subteam_never_stand_on_one_spot():
                 together += 1
                 assert np.hypot(*np.subtract(frame.positions[a], frame.positions[b])) > 0.5, (frame.time, a, b)
     assert together > 0  # t10 is carried by two robots
+
+
+def test_a_robot_off_every_site_arrives_when_the_plan_says():
+    """jackal_1's own place at cell_3 is on the far side of obj4 from the south; stopped
+    between sites, it still arrives when the plan (a straight line from its pose) says."""
+    sim = CellSim(CFG)
+    sim.assign("t03", ["panda_3"])
+    while sim.status["t03"] != DONE:
+        sim.step()
+    team = ["jackal_1", "jackal_2"]  # obj4 weighs 5: 2 + 3
+    sim.assign("t06", team)
+    for _ in range(60):
+        sim.step()
+    sim.fail("jackal_1")  # both stop between their starts and cell_3
+    sim.repair("jackal_1")
+    assert sim.robot_site["jackal_1"] == sim.robot_site["jackal_2"] == ""
+    sim.assign("t06", team)
+    planned = sim.start["t06"]  # the plan's arrival, straight from their poses
+    while sim.jobs["t06"].phase == "approach":
+        sim.step()
+    assert sim.start["t06"] == pytest.approx(planned, abs=2 * CFG.dt)
