@@ -268,8 +268,9 @@ def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot
     """The part of ``graph`` the robots of ``team`` can schedule, and the tasks held back
     (id -> why). A task the whole present team cannot cover (Eqs. 10-11: robots failed or
     gone; with travel, the robots that can reach it) is held back with every task waiting
-    on it, until the team can cover it again; a DONE task it cannot cover any more is left out and dropped from its dependents'
-    prerequisites (they are satisfied). The rest is scheduled as usual."""
+    on it, until the team can cover it again; a DONE task it cannot cover any more is left
+    out and dropped from its dependents' prerequisites (they are satisfied). The rest is
+    scheduled as usual."""
     k = len(graph.capability_names)
     vectors = [r.capabilities for r in team.robots] + [t.capabilities for t in graph.tasks]
     if not graph.tasks or any(len(v) != k for v in vectors):
@@ -349,41 +350,34 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
             busy = float(r.busy_for) if math.isfinite(r.busy_for) else unknown_busy
             free_at[i] = now + max(busy, BUSY_EPS)
     start = np.full(m, np.nan)
-    own = _own_sites(inst, team)
+    tr = inst.travel
+    own = _robot_sites(inst, team)  # where each robot says it is
+    site = None if own is None else own.copy()  # and where it will be when its task is done
     for j, t in enumerate(graph.tasks):
         if status[j] == TaskStatus.ASSIGNED:
             idx = list(teams[j])
             busy_until = [free_at[i] for i in idx if free_at[i] > now]
             # just assigned, or unacknowledged: the subteam travels first (travel extension)
-            tr = inst.travel
             go = tr.arrival(idx, [int(own[i]) for i in idx], j) if tr is not None and own is not None else 0.0
             end = max(busy_until) if busy_until else now + go + inst.durations[j]
             free_at[idx] = np.maximum(free_at[idx], end)
             start[j] = end - inst.durations[j]
+            if tr is not None and site is not None:
+                site[idx] = tr.task_to[j]
         elif status[j] == TaskStatus.DONE:
             start[j] = t.start if t.start is not None else now - inst.durations[j]
-    return State(inst, now, free_at, status, start, teams, robot_site=_robot_sites(inst, team, status, teams))
+    return State(inst, now, free_at, status, start, teams, robot_site=site)
 
 
-def _own_sites(inst: Instance, team: TeamSnapshot) -> np.ndarray | None:
-    """Where each robot says it is (no task counted)."""
-    return _robot_sites(inst, team, np.zeros(inst.num_tasks, dtype=np.int8), [()] * inst.num_tasks)
-
-
-def _robot_sites(inst: Instance, team: TeamSnapshot, status: np.ndarray,
-                 teams: Sequence[tuple[int, ...]]) -> np.ndarray | None:
-    """With travel, where each robot is (a free one) or will be when its task is done
-    (a busy one: the task's end site, which the world may also give as its site)."""
+def _robot_sites(inst: Instance, team: TeamSnapshot) -> np.ndarray | None:
+    """With travel, the site index each robot of ``team`` says it is at (:func:`robot_site`)."""
     tr = inst.travel
     if tr is None:
         return None
     index = {name: k for k, name in enumerate(tr.sites)}
     known = frozenset(index)
-    site = np.array([index.get(robot_site(r, known, n), tr.robot_site[n]) for n, r in enumerate(team.robots)],
+    return np.array([index.get(robot_site(r, known, n), tr.robot_site[n]) for n, r in enumerate(team.robots)],
                     dtype=np.int64)
-    for j in np.flatnonzero(status == TaskStatus.ASSIGNED):
-        site[list(teams[int(j)])] = tr.task_to[int(j)]
-    return site
 
 
 def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: GraphSnapshot, now: float,

@@ -57,11 +57,10 @@ class Travel:
         :meth:`can_do`)."""
         r, a, t = (np.asarray(x, dtype=np.int64).reshape(-1) for x in (robots, at, tasks))
         speed = np.asarray(self.robot_speed, dtype=np.float64)[r][:, None]
-        d = self.distance[np.ix_(a, np.asarray(self.task_from, dtype=np.int64)[t])]
-        same = a[:, None] == np.asarray(self.task_from, dtype=np.int64)[t][None, :]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out = np.where(same, 0.0, np.where(speed > 0, d / np.where(speed > 0, speed, 1.0), np.inf))
-        moves = np.asarray(self.task_from, dtype=np.int64)[t] != np.asarray(self.task_to, dtype=np.int64)[t]
+        meet = np.asarray(self.task_from, dtype=np.int64)[t]
+        moves = meet != np.asarray(self.task_to, dtype=np.int64)[t]
+        out = np.where(speed > 0, self.distance[np.ix_(a, meet)] / np.where(speed > 0, speed, 1.0), np.inf)
+        out[a[:, None] == meet[None, :]] = 0.0  # already there
         out[(speed <= 0) & moves[None, :]] = np.inf  # a fixed robot never takes a task that moves its team
         return np.asarray(out, dtype=np.float64)
 

@@ -198,9 +198,10 @@ class CellSim:
         return (x + SLOT_RADIUS * math.cos(ang), y + SLOT_RADIUS * math.sin(ang))
 
     def _stand(self, rid: str, at: tuple[float, float], k: int, n: int) -> tuple[float, float]:
-        """Where member k of n stands to pick up an object at ``at``: where it is if it is
-        at that spot already (a robot that brought something there works on from where it
-        stands, no move, as the plan's zero travel says), else its slot."""
+        """Where member k of n stands to pick up an object at ``at``. Without plan_travel,
+        slot k of n. With it: where it is, if it is at the object already (the plan's zero
+        travel); for a robot off every site, short of the object on its straight line
+        there (the plan's drive); else its own place around the object."""
         if not self.cfg.plan_travel:
             return self._slot(at, k, n)
         here = self.position(rid)
