@@ -4,8 +4,12 @@ Records lvws/team_state, lvws/task_graph, lvws/assignments, lvws/markers, clock 
 diagnostics of its namespace (``-r __ns:=/cellA``: that cell's only) with raw
 (serialized) subscriptions, so the CDR bytes go to the bag as they came, under their
 fully qualified names; each connection keeps its topic's QoS. Messages are stamped with
-the node's clock: sim time with ``-p use_sim_time:=true`` (``lvws launch`` sets it), else
-wall time. Custom types come from lvws_msgs' .msg
+the node's clock: wall time, or sim time with ``-p use_sim_time:=true`` (``lvws launch``
+sets it). On sim time the bag is its own clock: a clock message is stamped with the time
+it carries, any other message with the newest clock recorded before it, and every clock
+message that has arrived is recorded before the next other message (the executor takes
+one message per subscription per turn, so under load the clock queue would otherwise lag
+the states behind it). Custom types come from lvws_msgs' .msg
 files. SIGINT or SIGTERM at any moment closes the bag: it stays readable with
 everything received until then. Every FLUSH_SECONDS the messages received so far go
 to disk as a closed MCAP chunk, so even after SIGKILL at most the last second is lost:
@@ -23,7 +27,9 @@ from pathlib import Path
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 
 from lvws_ros.ros.bag import flush, open_writer, qos_to_bag, typestore
 from lvws_ros.ros.entry import node_main
@@ -56,22 +62,56 @@ class Recorder(Node):
         self.writer = open_writer(output)
         self.count = 0
         self.closed = False
+        self.sim_time = bool(self.get_parameter("use_sim_time").value)
+        self.clock_ns = 0  # on sim time: the newest clock recorded
+        self.clock_sub: Subscription | None = None
         store = typestore()
-        # the clock first: a state and its clock arriving together are written clock first
         for topic, (type_name, qos) in sorted(TOPICS.items(), key=lambda item: item[0] != CLOCK_TOPIC):
             conn = self.writer.add_connection(self.resolve_topic_name(topic), type_name, typestore=store,
                                               offered_qos_profiles=[qos_to_bag(qos)])
-            self.create_subscription(message_class(type_name), topic, self._writer_for(conn), recording_qos(qos),
-                                     raw=True)
+            is_clock = topic == CLOCK_TOPIC
+            sub = self.create_subscription(message_class(type_name), topic,
+                                           self._clock_writer(conn) if is_clock else self._writer_for(conn),
+                                           recording_qos(qos), raw=True)
+            if is_clock:
+                self.clock_sub = sub
         # on the steady clock: a paused simulator must not stop the flushing
         self.create_timer(FLUSH_SECONDS, lambda: flush(self.writer), clock=Clock(clock_type=ClockType.STEADY_TIME))
 
+    def _clock_writer(self, conn: object) -> Callable[[bytes], None]:
+        clock_type = message_class(TOPICS[CLOCK_TOPIC][0])
+
+        def write(data: bytes) -> None:
+            if self.sim_time:
+                stamp = deserialize_message(data, clock_type).clock
+                self.clock_ns = max(self.clock_ns, stamp.sec * 1_000_000_000 + stamp.nanosec)
+            self._write(conn, data)
+        return write
+
     def _writer_for(self, conn: object) -> Callable[[bytes], None]:
         def write(data: bytes) -> None:
-            if not self.closed:
-                self.writer.write(conn, self.get_clock().now().nanoseconds, data)  # type: ignore[arg-type]
-                self.count += 1
+            self._drain_clock()
+            self._write(conn, data)
         return write
+
+    def _drain_clock(self) -> None:
+        """Record every clock message that has arrived (rclpy's executor takes them the
+        same way), so a message is never recorded ahead of a clock that came before it."""
+        sub = self.clock_sub
+        if sub is None:
+            return
+        while True:
+            with sub.handle:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            if taken is None:
+                return
+            sub.callback(taken[0])
+
+    def _write(self, conn: object, data: bytes) -> None:
+        if not self.closed:
+            t_ns = self.clock_ns if self.sim_time else self.get_clock().now().nanoseconds
+            self.writer.write(conn, t_ns, data)  # type: ignore[arg-type]
+            self.count += 1
 
     def destroy_node(self) -> None:
         """Close the bag first: it is complete and readable whatever stopped us."""
