@@ -6,8 +6,9 @@ Every problem is a :class:`~lvws_ros.errors.ConfigError` naming the file and the
 
 from __future__ import annotations
 
+import graphlib
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,12 +17,13 @@ import yaml
 
 from lvws_ros.errors import ConfigError
 
-__all__ = ["ARM_KINDS", "MOBILE_KINDS", "PART_PAYLOAD", "CellConfig", "CellSpec", "ObjectSpec", "RobotSpec", "TaskSpec",
-           "load_cell_config", "parse_task", "read_yaml", "start_site"]
+__all__ = ["ARM_KINDS", "FLOOR", "MOBILE_KINDS", "PART_PAYLOAD", "CellConfig", "CellSpec", "ObjectSpec", "RobotSpec", "TaskSpec",
+           "check_object_flow", "load_cell_config", "parse_task", "read_yaml", "start_site"]
 
 ARM_KINDS = ("panda",)
 PART_PAYLOAD = 0.1  # an assembly's part when its entry names none
 MOBILE_KINDS = ("jackal", "husky")
+FLOOR = ""  # where an object put down between cells is (a failed transport); only a transport picks it up
 
 
 @dataclass(frozen=True)
@@ -164,6 +166,43 @@ def parse_task(t: dict[str, Any], cells: Mapping[str, CellSpec], objects: Mappin
     raise ConfigError(f"task {tid}: unknown type {t['type']!r} (transport | assembly)")
 
 
+def check_object_flow(tasks: Sequence[TaskSpec], at: Mapping[str, str | None], started: Collection[str] = ()) -> None:
+    """Every task finds its object where it needs it, whatever order the scheduler picks:
+    two tasks on one object must be ordered by ``after`` (directly or not) unless both are
+    assemblies at one cell, and a task's object is then at the ``to`` of the latest
+    transport of it before the task, else where it is now (``at``; FLOOR: put down
+    between cells, where a transport picks it up). A transport needs it at ``from``, an
+    assembly at its cell; the ``started`` tasks have it already. ConfigError naming the
+    task(s) otherwise: such a task would wait forever."""
+    spec = {t.id: t for t in tasks}
+    graph = {t.id: [a for a in t.after if a in spec] for t in tasks}
+    try:
+        order = list(graphlib.TopologicalSorter(graph).static_order())
+    except graphlib.CycleError:
+        return  # the instance names the cycle (lvws_ros.core.problem)
+    before: dict[str, set[str]] = {}  # every task a task waits on, directly or not
+    for tid in order:
+        before[tid] = set().union(*(before[a] | {a} for a in graph[tid]))
+    for tid in order:
+        t = spec[tid]
+        need = t.source if t.type == "transport" else t.cell
+        same = [spec[o] for o in order if spec[o].object == t.object and o != tid]
+        for o in same:
+            unordered = o.id not in before[tid] and tid not in before[o.id]
+            if unordered and not (t.type == o.type == "assembly" and t.cell == o.cell):
+                raise ConfigError(f"tasks {tid} and {o.id} both work on {t.object} and neither comes after the "
+                                  f"other: one may take it away before the other (add one to the other's 'after')")
+        if tid in started:
+            continue
+        moves = [o for o in same if o.type == "transport" and o.id in before[tid]]  # ordered, by the check above
+        last = max(moves, key=lambda o: len(before[o.id])) if moves else None
+        here = at[t.object] if last is None else last.cell
+        if here != need and not (t.type == "transport" and here == FLOOR):
+            where = "between cells" if here == FLOOR else f"at {here}"
+            why = "no transport of it comes before" if last is None else f"the latest transport of it before: {last.id}"
+            raise ConfigError(f"task {tid}: {t.object} is {where} when it comes, not at {need} ({why})")
+
+
 def _parse_config(d: dict[str, Any]) -> CellConfig:
     sim = d.get("sim", {})
     cells = {cid: CellSpec(cid, _xy(c["position"], f"cell {cid} position"),
@@ -175,6 +214,7 @@ def _parse_config(d: dict[str, Any]) -> CellConfig:
             raise ConfigError(f"object {o['id']}: unknown cell {o['cell']!r}")
         objects[str(o["id"])] = ObjectSpec(str(o["id"]), _num(o["weight"], f"object {o['id']} weight"), str(o["cell"]))
     tasks = tuple(parse_task(t, cells, objects) for t in d["tasks"])
+    check_object_flow(tasks, {o.id: o.cell for o in objects.values()})
     plan_travel = _flag(d.get("plan_travel", False), "plan_travel")
     if plan_travel:  # the plan's sites: cells and start points; transports carry at nominal_speed
         nominal = _num(d.get("nominal_speed", 0.8), "nominal_speed")

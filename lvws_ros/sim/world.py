@@ -46,12 +46,21 @@ from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import shortfall
 from lvws_ros.core.travel import Travel, build_travel
 from lvws_ros.errors import AssignmentRejected, ConfigError, WorldEventRejected
-from lvws_ros.sim.config import ARM_KINDS, MOBILE_KINDS, CellConfig, RobotSpec, TaskSpec, parse_task, start_site
+from lvws_ros.sim.config import (
+    ARM_KINDS,
+    FLOOR,
+    MOBILE_KINDS,
+    CellConfig,
+    RobotSpec,
+    TaskSpec,
+    check_object_flow,
+    parse_task,
+    start_site,
+)
 
 __all__ = ["CellSim", "Event", "Frame", "build_instance"]
 
 QUEUED, READY, ASSIGNED, DONE = TaskStatus.QUEUED, TaskStatus.READY, TaskStatus.ASSIGNED, TaskStatus.DONE
-FLOOR = ""  # object_cell of an object put down between cells (a failed transport)
 
 
 def _dist(a: Sequence[float], b: Sequence[float]) -> float:
@@ -352,6 +361,7 @@ class CellSim:
             new.append(spec)
         if not new:
             raise WorldEventRejected("no task to add")
+        self._check_object_flow([*self.cfg.tasks, *new])
         self._rebuild([*self.cfg.tasks, *new])
         for spec in new:
             self.status[spec.id] = QUEUED
@@ -364,12 +374,7 @@ class CellSim:
             raise WorldEventRejected(f"unknown task {task_id!r}")
         if self.status[task_id] == DONE:
             raise WorldEventRejected(f"task {task_id} is done; only tasks not done can be cancelled")
-        spec = self._task_spec[task_id]
-        needs = sorted(t.id for t in self.cfg.tasks if t.id in self._descendants(task_id) and t.object == spec.object
-                       and self.status[t.id] != DONE)
-        if spec.type == "transport" and needs:  # they would wait for an object that never comes
-            raise WorldEventRejected(f"task {task_id} brings {spec.object} to {spec.cell} for {', '.join(needs)}: "
-                                     "cancel those first")
+        self._check_object_flow([t for t in self.cfg.tasks if t.id != task_id], f"cancelling {task_id}: ")
         events = []
         if task_id in self.jobs:
             events.append(Event(self.time, "interrupted", task_id, self._interrupt(task_id)))
@@ -379,17 +384,14 @@ class CellSim:
         self._refresh_ready()
         return [*events, Event(self.time, "cancelled", task_id, ())]
 
-    def _descendants(self, task_id: str) -> set[str]:
-        """The tasks that wait on ``task_id``, directly or not."""
-        out: set[str] = set()
-        stack = [task_id]
-        while stack:
-            k = stack.pop()
-            for t in self.cfg.tasks:
-                if k in t.after and t.id not in out:
-                    out.add(t.id)
-                    stack.append(t.id)
-        return out
+    def _check_object_flow(self, tasks: Sequence[TaskSpec], context: str = "") -> None:
+        """WorldEventRejected if, with ``tasks``, a task not done could wait forever for its
+        object (:func:`~lvws_ros.sim.config.check_object_flow`)."""
+        try:
+            check_object_flow([t for t in tasks if self.status.get(t.id) != DONE], self.object_cell,
+                              started=set(self.jobs))
+        except ConfigError as exc:
+            raise WorldEventRejected(f"{context}{exc}") from None
 
     def fail(self, robot_id: str) -> list[Event]:
         """The robot stops where it is and leaves the team; its task returns READY."""

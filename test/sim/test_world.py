@@ -193,6 +193,11 @@ def _write(tmp_path: Path, mutate) -> Path:
     (lambda d: d["tasks"][0].update(type="paint"), "unknown type 'paint'"),
     (lambda d: d["tasks"][0].update(after=["t14"]), "cyclic"),
     (lambda d: d.pop("cells"), "missing key 'cells'"),
+    # objects that would never be where a task needs them: the run would never end
+    (lambda d: d["tasks"][6].update(cell="cell_3"), "task t07: obj1 is at cell_2 when it comes, not at cell_3"),
+    (lambda d: d["tasks"][12].update(after=["t05"]), "tasks t07 and t13 both work on obj1 and neither comes after"),
+    (lambda d: d["tasks"][11].update({"from": "cell_3"}), "task t12: obj4 is at cell_2 when it comes, not at cell_3 "
+                                                          r"\(the latest transport of it before: t06\)"),
 ])
 def test_bad_configs_are_named(tmp_path, mutate, message):
     from lvws_ros.errors import InstanceError

@@ -56,9 +56,14 @@ def test_tasks_added_and_cancelled(sim):
     sim.cancel("t12")  # t14 waited for it
     assert "t12" not in sim.status and "t12" not in sim.inst.task_index
     assert all("t12" not in t.after for t in sim.cfg.tasks)
-    sim.submit([{"id": "t15", "type": "assembly", "object": "obj4", "cell": "cell_3", "duration": 2.0}])
-    assert sim.status["t15"] == READY and sim.graph_snapshot().tasks[-1].id == "t15"
-    sim.submit([{"id": "t16", "type": "transport", "object": "obj4", "from": "cell_3", "to": "cell_1",
+    hazard = {"id": "t15", "type": "assembly", "object": "obj4", "cell": "cell_3", "duration": 2.0}
+    with pytest.raises(WorldEventRejected, match="t15 and t06 both work on obj4 and neither comes after the other"):
+        sim.submit([hazard])  # if t06 took obj4 to cell_2 first, t15 would wait forever
+    with pytest.raises(WorldEventRejected, match="task t15: obj4 is at cell_2 when it comes, not at cell_3"):
+        sim.submit([{**hazard, "after": ["t09"]}])  # t12, which brought it back, is cancelled
+    sim.submit([{**hazard, "cell": "cell_2", "after": ["t09"]}])  # where obj4 stays now
+    assert sim.status["t15"] == QUEUED and sim.graph_snapshot().tasks[-1].id == "t15"
+    sim.submit([{"id": "t16", "type": "transport", "object": "obj4", "from": "cell_2", "to": "cell_1",
                  "after": ["t15"]}])
     assert sim.status["t16"] == QUEUED
     for bad, words in (([{"id": "t15", "type": "assembly", "object": "obj4", "cell": "cell_3", "duration": 1}], "taken"),
@@ -76,7 +81,8 @@ def test_tasks_added_and_cancelled(sim):
     assert [e.kind for e in events] == ["interrupted", "cancelled"] and sim.robot_task["panda_1"] is None
     with pytest.raises(WorldEventRejected, match="unknown task"):
         sim.cancel("t01")
-    with pytest.raises(WorldEventRejected, match="t04 brings obj2 to cell_2 for t08, t11: cancel those first"):
+    with pytest.raises(WorldEventRejected, match="cancelling t04: task t08: obj2 is at cell_1 when it comes, not at "
+                                                 "cell_2"):
         sim.cancel("t04")  # t08 and t11 work on obj2 after it: they would wait forever
     assert "t04" in sim.status
 
