@@ -17,6 +17,16 @@ and measured only there says little about a user's cell, so we draw from familie
   worker (payload 1) with 1..3 of K = 4..8 skills; a task needs 1..2 skills and 1..3
   workers (payload = workers); project networks with 1..3 successors per activity and
   skip edges; integer durations 1..20.
+* ``depot`` — held out, with travel (the travel extension of formats.md): a shop floor
+  of 4..7 stations at float coordinates in 20 m x 8 m, distances the straight line
+  rounded up to 0.5 m, given as a matrix (Dataset IV: 3..5 sites on an integer grid,
+  Manhattan); 4..7 robots with 1..2 of K = 3..5 skills (IV: 2..3 capabilities, any
+  subset), payloads 5..30 float; 40 % fixed at a station (IV: a third), the others at
+  0.4, 0.5, 0.8, 1 or 1.25 m/s (IV: 0.5 or 1; travel times then fall on 1 ms, so the
+  expert still proves optima); 6..12
+  tasks, 35 % transports (IV: 25 %), assembly in-trees or chains, log-normal float
+  durations around 10 s, payloads log-normal around 12. Each task is drawn again until
+  the robots that can reach it cover it.
 
 Instance ``k`` of family ``f`` comes from ``numpy.random.default_rng([seed, code(f), k])``.
 """
@@ -28,10 +38,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from lvws_ros.core.problem import Instance, Robot, Task
+from lvws_ros.core.subteams import covers
+from lvws_ros.core.travel import build_travel
 
 DAG_SHAPES = ("random", "layered", "chains", "in_tree", "out_tree", "wide", "deep")
 PAYLOAD_REGIMES = ("solo", "mixed", "heavy")
 REGIME_PROBS = (0.2, 0.4, 0.4)
+DEPOT_SPEEDS = (0.4, 0.5, 0.8, 1.0, 1.25)  # m/s: 0.5 m / speed is a whole number of ms
 
 
 @dataclass(frozen=True)
@@ -40,12 +53,15 @@ class Family:
     code: int
     held_out: bool
     description: str
+    travel: bool = False  # its instances have sites, speeds and task sites
 
 
 FAMILIES = {
     "mixed": Family("mixed", 11, False, "training mixture: K 1-8, 3-20 robots, 5-40 tasks, 7 DAG shapes"),
     "assembly": Family("assembly", 12, True, "held out: assembly in-trees, specialists, kg payloads, float durations"),
     "mspsp": Family("mspsp", 13, True, "held out: multi-skill project scheduling (unit workers, K 4-8)"),
+    "depot": Family("depot", 14, True, "held out, travel: 4-7 stations at float points, straight-line "
+                    "distances, K 3-5 specialists, 5 speeds 0.4-1.25, 40 % fixed, 35 % transports", travel=True),
 }
 
 
@@ -183,6 +199,48 @@ def mspsp_instance(rng: np.random.Generator, name: str, num_robots: int = 6, num
     return _instance(name, k, robot_caps, np.ones(n), task_caps, workers, durations, [sorted(p) for p in pre])
 
 
+def depot_instance(rng: np.random.Generator, name: str, num_robots: int | None = None,
+                   num_tasks: int | None = None) -> Instance:
+    """One instance of the held-out depot family, with travel (module docstring)."""
+    n = num_robots or int(rng.integers(4, 8))
+    m = num_tasks or int(rng.integers(6, 13))
+    k = int(rng.integers(3, 6))
+    stations = [f"st{i}" for i in range(int(rng.integers(4, 8)))]
+    xy = rng.uniform((0.0, 0.0), (20.0, 8.0), size=(len(stations), 2)).round(1)
+    while True:
+        caps = _specialists(rng, n, k, 2)
+        fixed = rng.random(n) < 0.4
+        fixed[: min(2, n)] = False  # at least two mobile robots
+        if caps[~fixed].any(axis=0).all():
+            break
+    payload = rng.uniform(5.0, 30.0, size=n).round(1)
+    robot_site = rng.integers(len(stations), size=n)
+    speed = rng.choice(DEPOT_SPEEDS, size=n)
+    durations = rng.lognormal(np.log(10.0), 0.5, size=m).round(1).clip(0.5)
+    pre = _dag(rng, m, str(rng.choice(("in_tree", "chains", "layered"))))
+    task_caps = np.zeros((m, k), dtype=bool)
+    task_payload = np.zeros(m)
+    sites = []
+    for j in range(m):
+        while True:
+            a, b = (int(x) for x in rng.choice(len(stations), size=2, replace=False))
+            if rng.random() >= 0.35:
+                b = a
+            able = ~fixed | ((robot_site == a) & (a == b))  # who can reach it
+            task_caps[j] = _task_caps(rng, 1, k, 2)[0]
+            task_payload[j] = round(float(rng.lognormal(np.log(12.0), 0.6)), 1)
+            if covers(caps[able], payload[able], task_caps[j], task_payload[j]):
+                break
+        sites.append((f"t{j}", stations[a], stations[b]))
+    inst = _instance(name, k, caps, payload, task_caps, task_payload, durations, pre)
+    line = np.ceil(2 * np.sqrt(((xy[:, None, :] - xy[None, :, :]) ** 2).sum(axis=-1))) / 2  # up to 0.5 m
+    distances = {a: {b: float(line[i, j]) for j, b in enumerate(stations) if j != i} for i, a in enumerate(stations)}
+    travel = build_travel({s: [float(x), float(y)] for s, (x, y) in zip(stations, xy, strict=True)}, distances,
+                          [(f"r{i}", stations[int(robot_site[i])], None if fixed[i] else float(speed[i]))
+                           for i in range(n)], sites)
+    return Instance(name, inst.capabilities, inst.robots, inst.tasks, travel=travel)
+
+
 def family_instance(key: str, index: int, seed: int, num_robots: int | None = None,
                     num_tasks: int | None = None) -> Instance:
     """Instance ``index`` of family ``key`` (``mixed`` draws its own sizes unless given)."""
@@ -192,14 +250,17 @@ def family_instance(key: str, index: int, seed: int, num_robots: int | None = No
         inst = mixed_instance(rng, "tmp", num_robots, num_tasks)
     elif key == "assembly":
         inst = assembly_instance(rng, "tmp", num_robots or 6, num_tasks or 18)
+    elif key == "depot":
+        inst = depot_instance(rng, "tmp", num_robots, num_tasks)
     else:
         inst = mspsp_instance(rng, "tmp", num_robots or 6, num_tasks or 18)
     return Instance(f"{inst.num_robots}r-{inst.num_tasks}t-{key}-{index:05d}", inst.capabilities, inst.robots,
-                    inst.tasks)
+                    inst.tasks, travel=inst.travel)
 
 
 TRAINING_FAMILIES = tuple(k for k, f in FAMILIES.items() if not f.held_out)
-HELD_OUT_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out)
+HELD_OUT_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out and not f.travel)  # Table I
+TRAVEL_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out and f.travel)  # Table III
 TEST_OFFSET = 1_000_000  # test instances of a family: indices from here (training uses 0, 1, ...)
 TEST_COUNT = 100
 

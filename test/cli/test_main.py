@@ -82,6 +82,8 @@ def test_evaluate_paper_writes_both_tables_and_the_waiting_section(tmp_path):
         r"^\| (GRP|LVWS) \| ([\d.]+) \| [\d.—]+ \| ([\d.]+) \| [\d.—]+ \|$", text, re.M)}
     assert set(rows) == {"GRP", "LVWS"} and all(x >= 0 for v in rows.values() for x in v)  # vs proven optima
     assert "Dataset I: 2/2 optima proven" in text
+    assert "| Method | IV | depot (held out) |" in text  # Table III: with travel, in and out of distribution
+    assert re.search(r"^\| LVWS \| [\d.]+ \| [\d.]+ \|$", text, re.M) and "- depot: 2/2 optima proven" in text
     assert re.search(r"^\| exact expert \(first 2 test instances\) \| [\d.]+ \| [\d.]+ \|$", text, re.M)
     assert (tmp_path / "paper-cache" / "expert-I-s0.json").is_file()
     bad = lvws("evaluate", "--paper", "--policies", "exact", "--out-dir", tmp_path, check=False)

@@ -254,3 +254,28 @@ def test_a_robot_that_cannot_reach_a_task_does_not_wait_voluntarily_for_it():
     waits = voluntary_waits(state, Decision((), tuple(state.free_robots())))
     assert fit in waits[arm_b]  # arm_b could start it now: a voluntary wait
     assert fit not in waits.get(arm_a, ())  # arm_a can never get there: not voluntary
+
+
+def test_the_held_out_depot_family_is_feasible_round_trips_and_is_proven_by_the_expert():
+    import numpy as np
+
+    from lvws_ros.core.families import DEPOT_SPEEDS, FAMILIES, TRAVEL_FAMILIES, family_instance
+    from lvws_ros.core.subteams import covers
+    from lvws_ros.policies.exact import solve_exact
+
+    assert TRAVEL_FAMILIES == ("depot",) and FAMILIES["depot"].held_out
+    for k in range(6):
+        inst = family_instance("depot", k, seed=3)
+        assert instance_key(inst) == instance_key(family_instance("depot", k, seed=3))  # seeded
+        tr = inst.travel
+        assert tr is not None and 4 <= len(tr.sites) <= 7 and 3 <= len(inst.capabilities) <= 5
+        assert np.allclose(tr.distance * 2, np.round(tr.distance * 2))  # 0.5 m steps, as a matrix in the file
+        assert {v for v in tr.robot_speed if v > 0} <= set(DEPOT_SPEEDS)  # 0: fixed
+        for j in range(inst.num_tasks):  # the robots that can reach a task cover it (Eqs. 10-11)
+            able = [i for i in range(inst.num_robots) if tr.can_do(i, j)]
+            assert covers(inst.robot_caps[able], inst.robot_payload[able], inst.task_caps[j], inst.tasks[j].payload)
+        again = instance_from_dict(json.loads(json.dumps(instance_to_dict(inst))))
+        assert instance_key(again) == instance_key(inst)
+        if k < 2:  # travel times fall on whole milliseconds: the expert proves, and its plan obeys rule 7
+            opt = solve_exact(inst, workers=2, time_limit=60)
+            assert opt.status == "optimal" and check_schedule(inst, opt.schedule) == []
