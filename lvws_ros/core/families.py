@@ -24,7 +24,7 @@ and measured only there says little about a user's cell, so we draw from familie
   subset), payloads 5..30 float; 40 % fixed at a station (IV: a third), the others at
   0.4, 0.5, 0.8, 1 or 1.25 m/s (IV: 0.5 or 1; travel times then fall on 1 ms, so the
   expert still proves optima); 6..12
-  tasks, 35 % transports (IV: 25 %), assembly in-trees or chains, log-normal float
+  tasks, 35 % transports (IV: 25 %), in-trees, chains or layers, log-normal float
   durations around 10 s, payloads log-normal around 12. Each task is drawn again until
   the robots that can reach it cover it.
 
@@ -204,6 +204,8 @@ def depot_instance(rng: np.random.Generator, name: str, num_robots: int | None =
     """One instance of the held-out depot family, with travel (module docstring)."""
     n = num_robots or int(rng.integers(4, 8))
     m = num_tasks or int(rng.integers(6, 13))
+    if n < 3:  # the mobile robots (at least two, 1-2 skills each) must hold all K <= 5 skills
+        raise ValueError(f"depot instances have at least 3 robots, not {n}")
     k = int(rng.integers(3, 6))
     stations = [f"st{i}" for i in range(int(rng.integers(4, 8)))]
     xy = rng.uniform((0.0, 0.0), (20.0, 8.0), size=(len(stations), 2)).round(1)

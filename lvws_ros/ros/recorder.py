@@ -23,6 +23,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -65,51 +66,74 @@ class Recorder(Node):
         self.sim_time = bool(self.get_parameter("use_sim_time").value)
         self.clock_ns = 0  # on sim time: the newest clock recorded
         self.clock_sub: Subscription | None = None
+        self._held: tuple[bytes, dict[str, Any]] | None = None  # a clock taken early that came after
+        self._record_clock: Callable[[bytes], None] = lambda data: None
         store = typestore()
         for topic, (type_name, qos) in sorted(TOPICS.items(), key=lambda item: item[0] != CLOCK_TOPIC):
             conn = self.writer.add_connection(self.resolve_topic_name(topic), type_name, typestore=store,
                                               offered_qos_profiles=[qos_to_bag(qos)])
             is_clock = topic == CLOCK_TOPIC
+            # a two-argument callback gets the message info too (rclpy; its annotation names one)
             sub = self.create_subscription(message_class(type_name), topic,
-                                           self._clock_writer(conn) if is_clock else self._writer_for(conn),
-                                           recording_qos(qos), raw=True)
+                                           self._clock_writer(conn) if is_clock  # type: ignore[arg-type]
+                                           else self._writer_for(conn), recording_qos(qos), raw=True)
             if is_clock:
                 self.clock_sub = sub
         # on the steady clock: a paused simulator must not stop the flushing
         self.create_timer(FLUSH_SECONDS, lambda: flush(self.writer), clock=Clock(clock_type=ClockType.STEADY_TIME))
 
-    def _clock_writer(self, conn: object) -> Callable[[bytes], None]:
+    def _clock_writer(self, conn: object) -> Callable[[bytes, dict[str, Any]], None]:
         clock_type = message_class(TOPICS[CLOCK_TOPIC][0])
 
-        def write(data: bytes) -> None:
+        def record(data: bytes) -> None:
+            t_ns = None
             if self.sim_time:
                 stamp = deserialize_message(data, clock_type).clock
-                self.clock_ns = max(self.clock_ns, stamp.sec * 1_000_000_000 + stamp.nanosec)
+                t_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+                self.clock_ns = max(self.clock_ns, t_ns)
+            self._write(conn, data, t_ns)
+
+        self._record_clock = record
+
+        def write(data: bytes, info: dict[str, Any]) -> None:  # the executor's turn: an older one held back first
+            self._drain_clock(until=None)
+            record(data)
+        return write
+
+    def _writer_for(self, conn: object) -> Callable[[bytes, dict[str, Any]], None]:
+        def write(data: bytes, info: dict[str, Any]) -> None:
+            self._drain_clock(until=int(info.get("received_timestamp", 0)))
             self._write(conn, data)
         return write
 
-    def _writer_for(self, conn: object) -> Callable[[bytes], None]:
-        def write(data: bytes) -> None:
-            self._drain_clock()
-            self._write(conn, data)
-        return write
-
-    def _drain_clock(self) -> None:
-        """Record every clock message that has arrived (rclpy's executor takes them the
-        same way), so a message is never recorded ahead of a clock that came before it."""
+    def _drain_clock(self, until: int | None) -> None:
+        """Record the clock messages that arrived no later than ``until`` (the received
+        timestamp of the message about to be recorded; None: only one held back), so a
+        message is recorded after every clock that came before it and before those that
+        came after: the clock subscription is taken as rclpy's executor takes it, and the
+        first clock that came later is held back for the next turn. A middleware without
+        received timestamps (all 0) gets every clock that has arrived first."""
         sub = self.clock_sub
-        if sub is None:
-            return
-        while True:
-            with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            if taken is None:
+        while sub is not None:
+            if self._held is None:
+                if until is None:
+                    return
+                with sub.handle:
+                    self._held = sub.handle.take_message(sub.msg_type, sub.raw)
+                if self._held is None:
+                    return
+            data, info = self._held
+            if until is not None and int(info.get("received_timestamp", 0)) > until:
                 return
-            sub.callback(taken[0])
+            self._held = None
+            self._record_clock(data)
+            if until is None:
+                return
 
-    def _write(self, conn: object, data: bytes) -> None:
+    def _write(self, conn: object, data: bytes, t_ns: int | None = None) -> None:
         if not self.closed:
-            t_ns = self.clock_ns if self.sim_time else self.get_clock().now().nanoseconds
+            if t_ns is None:
+                t_ns = self.clock_ns if self.sim_time else self.get_clock().now().nanoseconds
             self.writer.write(conn, t_ns, data)  # type: ignore[arg-type]
             self.count += 1
 

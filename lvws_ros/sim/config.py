@@ -198,7 +198,7 @@ def check_object_flow(tasks: Sequence[TaskSpec], at: Mapping[str, str | None], s
         last = max(moves, key=lambda o: len(before[o.id])) if moves else None
         here = at[t.object] if last is None else last.cell
         if here != need and not (t.type == "transport" and here == FLOOR):
-            where = "between cells" if here == FLOOR else f"at {here}"
+            where = "between cells" if here == FLOOR else "on a robot" if here is None else f"at {here}"
             why = "no transport of it comes before" if last is None else f"the latest transport of it before: {last.id}"
             raise ConfigError(f"task {tid}: {t.object} is {where} when it comes, not at {need} ({why})")
 

@@ -325,11 +325,16 @@ class CellSim:
         self.inst = build_instance(self.cfg)
         self._task_spec = {t.id: t for t in self.cfg.tasks}
 
+    @staticmethod
+    def _carrying(job: _Job) -> bool:
+        """The job's subteam has its object (a transport past its approach)."""
+        return job.task.type == "transport" and job.phase != "approach"
+
     def _interrupt(self, task_id: str) -> tuple[str, ...]:
         """Stop a running task: its subteam is released, a carried object is put down
         where it is, the task is READY again with no subteam. Returns the subteam."""
         job = self.jobs.pop(task_id)
-        if job.task.type == "transport" and job.phase != "approach":
+        if self._carrying(job):
             self.object_cell[job.task.object] = FLOOR
             self.bodies[job.task.object].velocity = (0.0, 0.0)
         for rid in job.team:
@@ -374,7 +379,11 @@ class CellSim:
             raise WorldEventRejected(f"unknown task {task_id!r}")
         if self.status[task_id] == DONE:
             raise WorldEventRejected(f"task {task_id} is done; only tasks not done can be cancelled")
-        self._check_object_flow([t for t in self.cfg.tasks if t.id != task_id], f"cancelling {task_id}: ")
+        at = dict(self.object_cell)
+        job = self.jobs.get(task_id)
+        if job is not None and self._carrying(job):
+            at[job.task.object] = FLOOR  # where _interrupt puts it down
+        self._check_object_flow([t for t in self.cfg.tasks if t.id != task_id], f"cancelling {task_id}: ", at)
         events = []
         if task_id in self.jobs:
             events.append(Event(self.time, "interrupted", task_id, self._interrupt(task_id)))
@@ -384,12 +393,14 @@ class CellSim:
         self._refresh_ready()
         return [*events, Event(self.time, "cancelled", task_id, ())]
 
-    def _check_object_flow(self, tasks: Sequence[TaskSpec], context: str = "") -> None:
+    def _check_object_flow(self, tasks: Sequence[TaskSpec], context: str = "",
+                           at: dict[str, str | None] | None = None) -> None:
         """WorldEventRejected if, with ``tasks``, a task not done could wait forever for its
-        object (:func:`~lvws_ros.sim.config.check_object_flow`)."""
+        object (:func:`~lvws_ros.sim.config.check_object_flow`; ``at``: where the objects
+        are, default now)."""
         try:
-            check_object_flow([t for t in tasks if self.status.get(t.id) != DONE], self.object_cell,
-                              started=set(self.jobs))
+            check_object_flow([t for t in tasks if self.status.get(t.id) != DONE],
+                              self.object_cell if at is None else at, started=set(self.jobs))
         except ConfigError as exc:
             raise WorldEventRejected(f"{context}{exc}") from None
 

@@ -264,6 +264,8 @@ def test_the_held_out_depot_family_is_feasible_round_trips_and_is_proven_by_the_
     from lvws_ros.policies.exact import solve_exact
 
     assert TRAVEL_FAMILIES == ("depot",) and FAMILIES["depot"].held_out
+    with pytest.raises(ValueError, match="at least 3 robots"):  # two could never hold K = 5 skills
+        family_instance("depot", 0, seed=3, num_robots=2)
     for k in range(6):
         inst = family_instance("depot", k, seed=3)
         assert instance_key(inst) == instance_key(family_instance("depot", k, seed=3))  # seeded

@@ -52,6 +52,25 @@ def test_a_robot_failing_mid_transport_puts_the_object_down_and_the_task_comes_b
     assert "jackal_2" in {r.id for r in sim.team_snapshot().robots if r.available}
 
 
+def test_cancelling_a_transport_that_carries_its_object_leaves_it_to_the_next_transport(sim):
+    sim.assign("t02", ["panda_1"])
+    while sim.status["t02"] != DONE:
+        sim.step()
+    sim.assign("t05", ["jackal_1"])  # obj3 (2) from cell_1 to cell_3
+    while sim.jobs["t05"].phase != "carry":
+        sim.step()
+    assert sim.object_cell["obj3"] is None  # on the robot
+    sim.submit([{"id": "t20", "type": "transport", "object": "obj3", "from": "cell_3", "to": "cell_1",
+                 "after": ["t05"]}])
+    events = sim.cancel("t05")  # obj3 is put down where it is; t20 picks it up there
+    assert [e.kind for e in events] == ["interrupted", "cancelled"]
+    assert sim.object_cell["obj3"] == FLOOR and sim.status["t20"] == READY
+    sim.assign("t20", ["jackal_1"])
+    while sim.status["t20"] != DONE:
+        sim.step()
+    assert sim.object_cell["obj3"] == "cell_1"
+
+
 def test_tasks_added_and_cancelled(sim):
     sim.cancel("t12")  # t14 waited for it
     assert "t12" not in sim.status and "t12" not in sim.inst.task_index
