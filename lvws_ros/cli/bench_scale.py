@@ -2,8 +2,9 @@
 nothing asserted.
 
 * whole-schedule time, peak memory and validity of every policy at 100 x 500 and
-  1000 x 5000 (robots x tasks) on our generator and on the subteam-heavy family, each run
-  in a child process of its own (peak RSS per run, a wall-time limit per run);
+  1000 x 5000 (robots x tasks) on our generator, on the subteam-heavy family and, with
+  travel, on the held-out depot family (:mod:`lvws_ros.core.families`; 4-7 stations),
+  each run in a child process of its own (peak RSS per run, a wall-time limit per run);
 * scheduler-node decision latency p50/p99 at 100 x 500: the node's work without DDS
   (message -> snapshot conversion of both messages, OnlineScheduler.decide) at each
   decision step of a whole run;
@@ -23,13 +24,17 @@ from typing import Any
 import numpy as np
 
 FAMILIES = ("ours", "subteam-heavy")
+TRAVEL_FAMILIES = ("depot",)  # whole schedules only (the latency bench's snapshots carry no sites)
 POLICIES = ("grp", "rand", "rand_subteam", "dbgm", "lvws", "lvws_rollout")
 ROLLOUT_BUDGET_MS = 100.0  # the rollout at scale: per decision step
 
 
 def make_instance(family: str, n: int, m: int, seed: int) -> Any:
     from lvws_ros.core.datasets import random_instance, subteam_heavy_instance
+    from lvws_ros.core.families import family_instance
 
+    if family in TRAVEL_FAMILIES:
+        return family_instance(family, 0, seed, num_robots=n, num_tasks=m)
     rng = np.random.default_rng([seed, n, m])
     if family == "ours":
         return random_instance(rng, n, m, f"ours-{n}r-{m}t", num_capabilities=3)
@@ -80,7 +85,7 @@ def bench_whole_schedules(seed: int, limit: float) -> None:
     print(f"lvws_rollout runs with a budget of {ROLLOUT_BUDGET_MS:g} ms per decision step.")
     print("| family | N x M | policy | seconds | decisions | makespan | valid | peak MiB |")
     print("|---|---|---|---|---|---|---|---|")
-    for family in FAMILIES:
+    for family in (*FAMILIES, *TRAVEL_FAMILIES):
         for n, m in ((100, 500), (1000, 5000)):
             for policy in POLICIES:
                 r = run_in_child(policy, family, n, m, seed, limit)
