@@ -26,13 +26,19 @@ def sim() -> CellSim:
     return CellSim(load_cell_config(CASE_STUDY))
 
 
+def _until_carrying(sim: CellSim, assembly: str, transport: str, robot: str) -> None:
+    """Run ``assembly`` (panda_1, at cell_1) to its end, then ``transport`` with ``robot``
+    until the robot carries the object."""
+    sim.assign(assembly, ["panda_1"])
+    while sim.status[assembly] != DONE:
+        sim.step()
+    sim.assign(transport, [robot])
+    while sim.jobs[transport].phase != "carry":
+        sim.step()
+
+
 def test_a_robot_failing_mid_transport_puts_the_object_down_and_the_task_comes_back(sim):
-    sim.assign("t01", ["panda_1"])
-    while sim.status["t01"] != DONE:
-        sim.step()
-    sim.assign("t04", ["jackal_2"])  # obj2 (3) from cell_1 to cell_2
-    while sim.jobs["t04"].phase != "carry":
-        sim.step()
+    _until_carrying(sim, "t01", "t04", "jackal_2")  # obj2 (3) from cell_1 to cell_2
     for _ in range(20):
         sim.step()
     where = sim.position("obj2")
@@ -53,12 +59,7 @@ def test_a_robot_failing_mid_transport_puts_the_object_down_and_the_task_comes_b
 
 
 def test_cancelling_a_transport_that_carries_its_object_leaves_it_to_the_next_transport(sim):
-    sim.assign("t02", ["panda_1"])
-    while sim.status["t02"] != DONE:
-        sim.step()
-    sim.assign("t05", ["jackal_1"])  # obj3 (2) from cell_1 to cell_3
-    while sim.jobs["t05"].phase != "carry":
-        sim.step()
+    _until_carrying(sim, "t02", "t05", "jackal_1")  # obj3 (2) from cell_1 to cell_3
     assert sim.object_cell["obj3"] is None  # on the robot
     sim.submit([{"id": "t20", "type": "transport", "object": "obj3", "from": "cell_3", "to": "cell_1",
                  "after": ["t05"]}])
