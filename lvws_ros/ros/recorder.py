@@ -67,7 +67,8 @@ class Recorder(Node):
         self.clock_ns = 0  # on sim time: the newest clock recorded
         self.clock_sub: Subscription | None = None
         self._held: tuple[bytes, dict[str, Any]] | None = None  # a clock taken early that came after
-        self._record_clock: Callable[[bytes], None] = lambda data: None
+        self._clock_conn: object = None
+        self._clock_type = message_class(TOPICS[CLOCK_TOPIC][0])
         store = typestore()
         for topic, (type_name, qos) in sorted(TOPICS.items(), key=lambda item: item[0] != CLOCK_TOPIC):
             conn = self.writer.add_connection(self.resolve_topic_name(topic), type_name, typestore=store,
@@ -75,30 +76,27 @@ class Recorder(Node):
             is_clock = topic == CLOCK_TOPIC
             # a two-argument callback gets the message info too (rclpy; its annotation names one)
             sub = self.create_subscription(message_class(type_name), topic,
-                                           self._clock_writer(conn) if is_clock  # type: ignore[arg-type]
+                                           self._on_clock if is_clock  # type: ignore[arg-type]
                                            else self._writer_for(conn), recording_qos(qos), raw=True)
             if is_clock:
-                self.clock_sub = sub
+                self.clock_sub, self._clock_conn = sub, conn
         # on the steady clock: a paused simulator must not stop the flushing
         self.create_timer(FLUSH_SECONDS, lambda: flush(self.writer), clock=Clock(clock_type=ClockType.STEADY_TIME))
 
-    def _clock_writer(self, conn: object) -> Callable[[bytes, dict[str, Any]], None]:
-        clock_type = message_class(TOPICS[CLOCK_TOPIC][0])
+    def _on_clock(self, data: bytes, info: dict[str, Any]) -> None:
+        """The executor's turn for the clock: a clock held back (it came earlier) first."""
+        if self._held is not None:
+            self._record_clock(self._held[0])
+            self._held = None
+        self._record_clock(data)
 
-        def record(data: bytes) -> None:
-            t_ns = None
-            if self.sim_time:
-                stamp = deserialize_message(data, clock_type).clock
-                t_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-                self.clock_ns = max(self.clock_ns, t_ns)
-            self._write(conn, data, t_ns)
-
-        self._record_clock = record
-
-        def write(data: bytes, info: dict[str, Any]) -> None:  # the executor's turn: an older one held back first
-            self._drain_clock(until=None)
-            record(data)
-        return write
+    def _record_clock(self, data: bytes) -> None:
+        t_ns = None
+        if self.sim_time:
+            stamp = deserialize_message(data, self._clock_type).clock
+            t_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+            self.clock_ns = max(self.clock_ns, t_ns)
+        self._write(self._clock_conn, data, t_ns)
 
     def _writer_for(self, conn: object) -> Callable[[bytes, dict[str, Any]], None]:
         def write(data: bytes, info: dict[str, Any]) -> None:
@@ -106,29 +104,25 @@ class Recorder(Node):
             self._write(conn, data)
         return write
 
-    def _drain_clock(self, until: int | None) -> None:
+    def _drain_clock(self, until: int) -> None:
         """Record the clock messages that arrived no later than ``until`` (the received
-        timestamp of the message about to be recorded; None: only one held back), so a
-        message is recorded after every clock that came before it and before those that
-        came after: the clock subscription is taken as rclpy's executor takes it, and the
-        first clock that came later is held back for the next turn. A middleware without
-        received timestamps (all 0) gets every clock that has arrived first."""
+        timestamp of the message about to be recorded), so a message is recorded after
+        every clock that came before it and before those that came after: the clock
+        subscription is taken as rclpy's executor takes it, and the first clock that came
+        later is held back for the next turn. A middleware without received timestamps
+        (all 0) gets every clock that has arrived first."""
         sub = self.clock_sub
         while sub is not None:
             if self._held is None:
-                if until is None:
-                    return
                 with sub.handle:
                     self._held = sub.handle.take_message(sub.msg_type, sub.raw)
                 if self._held is None:
                     return
             data, info = self._held
-            if until is not None and int(info.get("received_timestamp", 0)) > until:
+            if int(info.get("received_timestamp", 0)) > until:
                 return
             self._held = None
             self._record_clock(data)
-            if until is None:
-                return
 
     def _write(self, conn: object, data: bytes, t_ns: int | None = None) -> None:
         if not self.closed:

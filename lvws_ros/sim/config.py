@@ -183,10 +183,13 @@ def check_object_flow(tasks: Sequence[TaskSpec], at: Mapping[str, str | None], s
     before: dict[str, set[str]] = {}  # every task a task waits on, directly or not
     for tid in order:
         before[tid] = set().union(*(before[a] | {a} for a in graph[tid]))
+    on: dict[str, list[TaskSpec]] = {}  # each object's tasks, in order
+    for tid in order:
+        on.setdefault(spec[tid].object, []).append(spec[tid])
     for tid in order:
         t = spec[tid]
         need = t.source if t.type == "transport" else t.cell
-        same = [spec[o] for o in order if spec[o].object == t.object and o != tid]
+        same = [o for o in on[t.object] if o.id != tid]
         for o in same:
             unordered = o.id not in before[tid] and tid not in before[o.id]
             if unordered and not (t.type == o.type == "assembly" and t.cell == o.cell):
