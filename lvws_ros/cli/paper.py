@@ -34,7 +34,7 @@ from lvws_ros.core.formats import instance_key
 from lvws_ros.core.metrics import ExpertRecord, RunRecord, run_policy, suboptimality
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
-from lvws_ros.learning.features import LEGACY_PAIR_FEATURES
+from lvws_ros.learning.features import LEGACY_PAIR_FEATURES, TRAVEL_PAIR_FEATURES
 from lvws_ros.registry import make_policy
 
 POLICIES = ("rand", "rand_subteam", "grp", "dbgm", "lvws", "lvws_rollout")
@@ -113,7 +113,7 @@ def _training_section(meta: dict[str, Any]) -> list[str]:
         "## How the shipped LVWS model was trained",
         "",
         f"Model {_model_format(lv)} (capability-agnostic, scale-free features; sparse task graph"
-        f"{'; travel pair features' if _model_format(lv).endswith('/3') else ''}). Training data: the "
+        f"{_TRAVEL_NOTE.get(_model_format(lv), '')}). Training data: the "
         f"training splits of datasets {lv.get('datasets')} and the training family mixture {lv.get('families')} "
         "(`lvws_ros/core/families.py`). Validation: the last 100 training instances of each source, held out of "
         "training (mean suboptimality against the best schedule CP-SAT finds in 10 s). A DAgger round is kept "
@@ -135,10 +135,15 @@ def _training_section(meta: dict[str, Any]) -> list[str]:
     ]
 
 
+_TRAVEL_NOTE = {"lvws-gatn/3": "; travel pair features",
+                "lvws-gatn/4": "; travel pair features, busy robots included"}
+
+
 def _model_format(meta: dict[str, Any]) -> str:
-    """lvws-gatn/3 for a model that reads the travel pair features, else lvws-gatn/2."""
-    cfg = meta.get("train_config", {}).get("model", {})
-    return "lvws-gatn/3" if cfg.get("pair_features", LEGACY_PAIR_FEATURES) > LEGACY_PAIR_FEATURES else "lvws-gatn/2"
+    """lvws-gatn/4, /3 or /2 by the pair features the model reads (busy robots, travel, none)."""
+    read = meta.get("train_config", {}).get("model", {}).get("pair_features", LEGACY_PAIR_FEATURES)
+    return "lvws-gatn/4" if read > TRAVEL_PAIR_FEATURES else "lvws-gatn/3" if read > LEGACY_PAIR_FEATURES \
+        else "lvws-gatn/2"
 
 
 def _table1(cols: dict[str, Column], policies: Sequence[str]) -> list[str]:
@@ -210,7 +215,7 @@ def _table3(cols: dict[str, Column], policies: Sequence[str]) -> list[str]:
     lines = ["", "## Table III (ours) — suboptimality (%) against the proven optimum, with travel", "",
              f"Dataset IV: {DATASETS['IV'].description}; test instances are the indices after the training split. "
              "Held out (never used in training, validation or any tuning): "
-             + "; ".join(f"{k}: {FAMILIES[k].description}" for k in keys if k in FAMILIES)
+             + "; ".join(f"{k}: {FAMILIES[k].description.removeprefix('held out, ')}" for k in keys if k in FAMILIES)
              + " (`lvws_ros/core/families.py`). The travel extension of formats.md; rule 7 is checked on every "
              "schedule. The exact expert models travel as the executor does (`lvws_ros/policies/exact.py`). "
              "Targets of the issue, on Dataset IV: LVWS <= 5 %, search (LVWS + rollout) <= 2 %.", "",

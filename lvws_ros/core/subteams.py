@@ -19,12 +19,14 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
+    "COVER_CHUNK",
     "MAX_ENUMERATED",
     "TOLERANCE",
     "BoolArray",
     "FloatArray",
     "covered",
     "covers",
+    "earliest_cover",
     "helps",
     "minimal_subteams",
     "shortfall",
@@ -68,6 +70,32 @@ def covered(team_caps: npt.ArrayLike, team_payload: npt.ArrayLike, need_caps: np
 def covers(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float) -> bool:
     """Eqs. 10-11 for the robots whose capability rows (n, K) and payloads (n,) are given."""
     return bool(covered(caps.any(axis=0), payloads.sum(), need_caps, need_payload))
+
+
+COVER_CHUNK = 1 << 22  # earliest_cover: robots x tasks x capabilities per chunk of tasks
+
+
+def earliest_cover(times: FloatArray, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
+                   need_payload: FloatArray) -> FloatArray:
+    """(m,): for each task j the least t at which the robots with ``times[:, j] <= t``
+    together cover it (Eqs. 10-11), inf when all those with a finite time do not.
+    ``times`` (n, m) (inf: never), ``caps`` (n, K), ``payloads`` (n,), ``need_caps``
+    (m, K), ``need_payload`` (m,). O(n log n + n K) per task, in chunks of tasks."""
+    n, m = times.shape
+    out = np.full(m, np.inf)
+    if n == 0:
+        return out
+    step = max(1, COVER_CHUNK // max(n * caps.shape[1], 1))
+    for lo in range(0, m, step):
+        cols = slice(lo, min(m, lo + step))
+        order = np.argsort(times[:, cols], axis=0, kind="stable")  # (n, c): soonest first
+        soon = np.take_along_axis(times[:, cols], order, axis=0)
+        have = np.logical_or.accumulate(caps[order], axis=0)  # (n, c, K): the first k robots' capabilities
+        load = np.cumsum(payloads[order], axis=0)
+        ok = covered(have, load, need_caps[None, cols], need_payload[None, cols]) & np.isfinite(soon)
+        first = ok.argmax(axis=0)
+        out[cols] = np.where(ok.any(axis=0), soon[first, np.arange(soon.shape[1])], np.inf)
+    return out
 
 
 def helps(robot_caps: BoolArray, need_caps: BoolArray, need_payload: FloatArray) -> BoolArray:

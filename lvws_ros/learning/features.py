@@ -32,11 +32,16 @@ alone covers j (Eqs. 10-11); i holds a capability j needs; share of j's capabili
 holds; min(w_i / w_j, 2) / 2; i is the only free robot holding one of j's capabilities;
 and with travel (model ``lvws-gatn/3``; zeros without): i's arrival time at j and how
 much later it is than the earliest free robot's, each as x / (1 + x) of x = seconds /
-mean duration (1: never). A ``lvws-gatn/2`` checkpoint reads the first
-LEGACY_PAIR_FEATURES only.
+mean duration (1: never); and (model ``lvws-gatn/4``) with busy robots too, a busy one
+setting out when its time left is over from where its task ends: how much later i
+arrives than the earliest a subteam covering j can be there (Eqs. 10-11), and (the same
+for the whole column) how much later that earliest subteam is with free robots only,
+both squashed the same way (0: nobody sooner). They tell the network when holding a
+task back for busy robots pays. A ``lvws-gatn/2`` checkpoint reads the first LEGACY_PAIR_FEATURES only, a
+``lvws-gatn/3`` one the first TRAVEL_PAIR_FEATURES.
 
-Cost per decision step: O(N K + T + E + R C K) with T the tasks not done, E their DAG
-edges, R the free robots and C the ready tasks; what depends on the instance alone is
+Cost per decision step: O(N K + T + E + R C K), and O(N C (K + log N)) more with travel, with T the
+tasks not done, E their DAG edges, R the free robots and C the ready tasks; what depends on the instance alone is
 computed once (:class:`InstanceFeatures`).
 """
 
@@ -49,12 +54,13 @@ import numpy.typing as npt
 
 from lvws_ros.core.executor import State, TaskStatus
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import TOLERANCE, covered, helps
+from lvws_ros.core.subteams import TOLERANCE, covered, earliest_cover, helps
 
 ROBOT_FEATURES = 7
 TASK_FEATURES = 17
-PAIR_FEATURES = 7
+PAIR_FEATURES = 9
 LEGACY_PAIR_FEATURES = 5  # lvws-gatn/2: no travel features
+TRAVEL_PAIR_FEATURES = 7  # lvws-gatn/3: travel features of free robots only
 CAP_COUNT = 10.0  # "fewest robots" saturates here
 
 F32 = npt.NDArray[np.float32]
@@ -181,7 +187,29 @@ class InstanceFeatures:
             out[:, :-1, 5] = _squash(arrive)
             with np.errstate(invalid="ignore"):  # inf - inf where no free robot reaches j: never, 1
                 out[:, :-1, 6] = _squash(np.where(np.isfinite(arrive), arrive - first[None, :], np.inf))
+            soon_any = self.soonest(state, ready, np.where(free, 0.0, state.busy_remaining()))
+            soon_free = self.soonest(state, ready, np.where(free, 0.0, np.inf))
+            out[:, :-1, 7] = _squash(_later(arrive, soon_any[None, :]))
+            out[:, :-1, 8] = _squash(_later(soon_free, soon_any))[None, :]
         return out
+
+    def soonest(self, state: State, ready: npt.NDArray[np.int64],
+                wait: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """(len(ready),) in mean durations: the earliest a subteam covering each ready task
+        can be there (Eqs. 10-11, :func:`earliest_cover`), robot r setting out after
+        ``wait[r]`` seconds (inf: never) from where it is when free."""
+        inst = self.instance
+        times = wait[:, None] + state.arrivals(np.arange(inst.num_robots), ready)
+        start = earliest_cover(times, inst.robot_caps, inst.robot_payload, inst.task_caps[ready],
+                               inst.task_payload[ready])
+        return start / self.time_unit
+
+
+def _later(x: npt.NDArray[np.float64], ref: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """max(x - ref, 0), inf where x is inf, 0 where only ref is (nobody is sooner)."""
+    with np.errstate(invalid="ignore"):
+        gap = np.maximum(x - ref, 0.0)
+    return np.where(np.isinf(x), np.inf, np.where(np.isinf(ref), 0.0, gap))
 
 
 def _squash(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

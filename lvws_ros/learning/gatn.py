@@ -47,7 +47,7 @@ from lvws_ros.learning.features import (
 )
 
 NEG = -1e9  # masked logits
-MODEL_FORMAT = "lvws-gatn/3"  # /2: no travel pair features (config without pair_features)
+MODEL_FORMAT = "lvws-gatn/4"  # /3: travel pair features of free robots only; /2: none (no pair_features)
 ENTRY_CHUNK = 1 << 18  # reward entries per chunk at inference: bounds memory at fleet scale
 INFERENCE_THREADS = 1
 ROW_CHUNK = 256  # attending robots per chunk of the dense robot GAT
@@ -63,7 +63,7 @@ class GATNConfig:
     mlp_hidden: int = 64
     use_transformer: bool = True
     wait_head: bool = False
-    pair_features: int = PAIR_FEATURES  # the first ones read; LEGACY_PAIR_FEATURES: lvws-gatn/2
+    pair_features: int = PAIR_FEATURES  # the first ones read: LEGACY_/TRAVEL_PAIR_FEATURES for lvws-gatn/2, /3
 
     def to_dict(self) -> dict[str, int | bool]:
         return asdict(self)

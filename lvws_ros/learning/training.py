@@ -34,7 +34,7 @@ from lvws_ros.errors import ConfigError, ModelError
 from lvws_ros.learning.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from lvws_ros.learning.demonstrations import DEMOS_FORMAT, Demo, dagger_demos, label_instances, load_demos, save_demos
 from lvws_ros.learning.features import PAIR_FEATURES
-from lvws_ros.learning.gatn import GATN, GATNConfig
+from lvws_ros.learning.gatn import GATN, MODEL_FORMAT, GATNConfig
 from lvws_ros.learning.loss import batch_tensors, imitation_loss, wait_targets
 from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, DBGMPolicy, LVWSPolicy
 
@@ -317,7 +317,7 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
             grown.load_state_dict(start.state_dict(), strict=False)
             start = grown
             log(f"{init}: a wait head added")
-        if start.cfg.pair_features < PAIR_FEATURES:  # a lvws-gatn/2 model: learn to read the travel features
+        if start.cfg.pair_features < PAIR_FEATURES:  # an older model: learn to read the features it lacks
             wider = GATN(replace(start.cfg, pair_features=PAIR_FEATURES))
             state = start.state_dict()
             old_w = state["psi_p.weight"]
@@ -325,7 +325,8 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
                                               dim=1)  # the new columns start at zero: the same outputs at first
             wider.load_state_dict(state)
             start = wider
-            log(f"{init}: reads the travel pair features from now on (lvws-gatn/3)")
+            log(f"{init}: reads {PAIR_FEATURES - old_w.shape[1]} more travel pair features from now on "
+                f"({MODEL_FORMAT})")
         tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
         log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")
     demos: list[Demo] = []

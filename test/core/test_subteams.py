@@ -13,7 +13,7 @@ from lvws_ros.core.datasets import subteam_heavy_instance
 from lvws_ros.core.executor import simulate
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import check_schedule
-from lvws_ros.core.subteams import cover_with, covers, lightest_cover, minimal_subteams, random_cover
+from lvws_ros.core.subteams import cover_with, covers, earliest_cover, lightest_cover, minimal_subteams, random_cover
 from lvws_ros.registry import make_policy
 
 
@@ -43,6 +43,23 @@ def test_constructive_subteams_cover_and_are_minimal(case, seed):
         team = cover_with(caps, payloads, need, need_payload, member)
         if team is not None:
             assert member in team and team in minimal
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(case=teams(), times=st.lists(st.sampled_from([0.0, 1.0, 2.0, 3.5, 7.0, float("inf")]), min_size=9,
+                                    max_size=9))
+def test_earliest_cover_is_the_first_time_the_robots_there_cover_the_task(case, times):
+    """Against the definition: the least robot time t with the robots there by t a cover."""
+    caps, payloads, need, need_payload = case
+    t = np.array(times[:len(caps)])
+    finite = sorted({x for x in t if np.isfinite(x)})
+    expect = next((x for x in finite if covers(caps[t <= x], payloads[t <= x], need, need_payload)), np.inf)
+    got = earliest_cover(np.stack([t, t[::-1]], axis=1), caps, payloads, np.stack([need, need]),
+                         np.array([need_payload, need_payload]))
+    assert got[0] == expect
+    rev = t[::-1]
+    assert got[1] == next((x for x in finite if covers(caps[rev <= x], payloads[rev <= x], need, need_payload)),
+                          np.inf)  # the same robots at other times
 
 
 def test_the_lightest_cover_is_the_lightest_minimal_subteam_almost_always():

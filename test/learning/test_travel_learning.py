@@ -80,6 +80,37 @@ def test_travel_pair_features_are_arrival_times_and_zero_without_travel():
     assert np.all(InstanceFeatures(plain).encode(State.initial(plain)).pairs[..., LEGACY_PAIR_FEATURES:] == 0)
 
 
+def test_busy_robot_pair_features_see_a_task_that_starts_sooner_by_waiting_for_a_busy_robot():
+    """A welder is busy at site a for 2 s more; the free one is 10 s away. Waiting for
+    the busy one starts the next weld at a 8 s sooner: the free welder's feature 7 (later
+    than the earliest start) and the column's feature 8 (the free robots' start later than
+    the earliest) both say 8 s; the free carrier at a, who cannot weld, changes neither."""
+    inst = instance_from_dict({
+        "format": "lvws-instance/1", "name": "busy-welder", "capabilities": ["weld", "carry"],
+        "sites": {"a": [0.0, 0.0], "b": [10.0, 0.0]},
+        "robots": [{"id": "near", "capabilities": [1, 0], "payload": 1.0, "site": "a", "speed": 1.0},
+                   {"id": "far", "capabilities": [1, 0], "payload": 1.0, "site": "b", "speed": 1.0},
+                   {"id": "carrier", "capabilities": [0, 1], "payload": 1.0, "site": "a", "speed": 1.0}],
+        "tasks": [{"id": "w1", "capabilities": [1, 0], "payload": 0.0, "duration": 2.0, "after": [], "site": "a"},
+                  {"id": "w2", "capabilities": [1, 0], "payload": 0.0, "duration": 4.0, "after": [], "site": "a"}]})
+    state = State.initial(inst)
+    state.start(0, [0])  # "near" welds w1 until t = 2
+    state.refresh()
+    feats = InstanceFeatures(inst).encode(state)
+    assert list(feats.rows) == [1, 2] and len(feats.cols) == 2  # w2, then the idle column
+    unit = 3.0  # mean duration
+
+    def squash(x: float) -> float:
+        return x / (1 + x)
+
+    far, carrier = feats.pairs[0, 0], feats.pairs[1, 0]
+    assert far[5] == pytest.approx(squash(10 / unit)) and far[6] == pytest.approx(squash(10 / unit))
+    assert far[7] == pytest.approx(squash(8 / unit)) and far[8] == pytest.approx(squash(8 / unit))
+    assert carrier[8] == far[8] and carrier[7] == 0.0  # there at once, but no welder: only the column says wait
+    at_start = InstanceFeatures(inst).encode(State.initial(inst)).pairs  # nobody busy: nothing sooner by waiting
+    assert np.all(at_start[:, :-1, 8] == 0)
+
+
 @pytest.mark.parametrize("make", [LVWSPolicy, DBGMPolicy, lambda: LVWSRolloutPolicy(budget_ms=200)])
 def test_learned_policies_give_schedules_valid_by_the_travel_rules(make):
     for k in (2000, 2001, 2002, 2003):
