@@ -18,9 +18,10 @@ from lvws_ros.core.formats import instance_from_dict, instance_key, instance_to_
 from lvws_ros.core.matching import greedy_match
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.core.subteams import covers
+from lvws_ros.errors import ModelError
 from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint, read_checkpoint
 from lvws_ros.learning.demonstrations import expert_demos, load_demos, save_demos
-from lvws_ros.learning.features import LEGACY_PAIR_FEATURES, PAIR_FEATURES, InstanceFeatures
+from lvws_ros.learning.features import LEGACY_PAIR_FEATURES, PAIR_FEATURES, TRAVEL_PAIR_FEATURES, InstanceFeatures
 from lvws_ros.learning.gatn import GATN, GATNConfig, decision_outputs
 from lvws_ros.learning.policies import DBGMPolicy, LVWSPolicy, LVWSRolloutPolicy
 
@@ -160,6 +161,14 @@ def test_demonstrations_written_before_the_travel_features_read_with_zero_travel
     for d in travel:  # X: only robots that can reach a task
         assert d.mask.shape == d.expert.shape
         assert not (d.expert > 0)[~d.mask].any()
+    # written by lvws-gatn/3 (no busy-robot columns): padded without travel, refused with it
+    for name, group in (("plain", demos), ("travel", travel)):
+        save_demos([replace(d, features=replace(d.features, pairs=d.features.pairs[..., :TRAVEL_PAIR_FEATURES]))
+                    for d in group], tmp_path / f"{name}3.npz")
+    assert all(np.array_equal(a.features.pairs, b.features.pairs)
+               for a, b in zip(load_demos(tmp_path / "plain3.npz")[0], demos, strict=True))
+    with pytest.raises(ModelError, match=r"travel3\.npz: travel states without the busy-robot pair features"):
+        load_demos(tmp_path / "travel3.npz")
 
 
 def test_fine_tuning_a_model_without_travel_features_teaches_it_to_read_them(tmp_path):
