@@ -7,7 +7,7 @@ nothing asserted.
   each run in a child process of its own (peak RSS per run, a wall-time limit per run);
 * scheduler-node decision latency p50/p99 at 100 x 500: the node's work without DDS
   (message -> snapshot conversion of both messages, OnlineScheduler.decide) at each
-  decision step of a whole run;
+  decision step of a whole run, with travel (sites in the messages) on the depot family;
 * the exact expert on 24-40 robots x 30 tasks (subteam-heavy): status, bound and gap in 60 s.
 """
 
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 FAMILIES = ("ours", "subteam-heavy")
-TRAVEL_FAMILIES = ("depot",)  # whole schedules only (the latency bench's snapshots carry no sites)
+TRAVEL_FAMILIES = ("depot",)
 POLICIES = ("grp", "rand", "rand_subteam", "dbgm", "lvws", "lvws_rollout")
 ROLLOUT_BUDGET_MS = 100.0  # the rollout at scale: per decision step
 
@@ -112,17 +112,30 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     gc.freeze()  # as the scheduler node does after start-up
     state = State.initial(inst)
     names = tuple(inst.capabilities)
+    tr = inst.travel  # with travel, the snapshots carry sites as the simulator's do (sim/world.py)
+    sites = () if tr is None else tuple((s, x, y) for s, (x, y) in zip(tr.sites, tr.coordinates, strict=True))
+    distances = () if tr is None else tuple(float(d) for d in tr.distance.reshape(-1))
+
+    def where(r: int) -> tuple[str, float]:  # a busy robot: where its task leaves it
+        if tr is None or state.robot_site is None:
+            return "", 0.0
+        return tr.sites[int(state.robot_site[r])], tr.robot_speed[r]
+
+    def task_sites(j: int) -> tuple[str, str]:
+        return ("", "") if tr is None else (tr.sites[tr.task_from[j]], tr.sites[tr.task_to[j]])
+
     lat: list[float] = []
     while not state.done():
         free = state.robot_available()
         team = TeamSnapshot(state.time, names, tuple(
-            RobotInfo(r.id, "x", bool(free[i]), r.capabilities, r.payload, "", float(state.busy_remaining()[i]))
+            RobotInfo(r.id, "x", bool(free[i]), r.capabilities, r.payload, "", float(state.busy_remaining()[i]),
+                      (0.0, 0.0, 0.0), *where(i))
             for i, r in enumerate(inst.robots)))
         graph = GraphSnapshot(state.time, names, tuple(
             TaskInfo(t.id, int(state.task_status[j]), t.capabilities, t.payload, t.duration, t.after,
                      tuple(inst.robots[r].id for r in state.task_team[j]),
-                     None if np.isnan(state.task_start[j]) else float(state.task_start[j]))
-            for j, t in enumerate(inst.tasks)))
+                     None if np.isnan(state.task_start[j]) else float(state.task_start[j]), None, *task_sites(j))
+            for j, t in enumerate(inst.tasks)), sites, distances)
         team_msg, graph_msg = convert.team_to_msg(team), convert.graph_to_msg(graph)
         t0 = time.perf_counter()
         online.offer_team(convert.team_from_msg(team_msg))
@@ -147,7 +160,7 @@ def bench_node_latency(seed: int) -> None:
           "OnlineScheduler.decide, no DDS)")
     print("| family | policy | decisions | p50 ms | p99 ms | max ms |")
     print("|---|---|---|---|---|---|")
-    for family in FAMILIES:
+    for family in (*FAMILIES, *TRAVEL_FAMILIES):
         for policy in ("grp", "lvws"):
             lat = [1000 * x for x in node_latency(policy, family, 100, 500, seed)]
             print(f"| {family} | {policy} | {len(lat)} | {statistics.median(lat):.1f} | "
