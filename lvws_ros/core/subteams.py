@@ -72,7 +72,7 @@ def covers(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_pay
     return bool(covered(caps.any(axis=0), payloads.sum(), need_caps, need_payload))
 
 
-COVER_CHUNK = 1 << 22  # earliest_cover: robots x tasks x capabilities per chunk of tasks
+COVER_CHUNK = 1 << 22  # earliest_cover: robots x tasks x max(capabilities, 8) per chunk of tasks
 
 
 def earliest_cover(times: FloatArray, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
@@ -85,7 +85,7 @@ def earliest_cover(times: FloatArray, caps: BoolArray, payloads: FloatArray, nee
     out = np.full(m, np.inf)
     if n == 0:
         return out
-    step = max(1, COVER_CHUNK // max(n * caps.shape[1], 1))
+    step = max(1, COVER_CHUNK // (n * max(caps.shape[1], 8)))  # the (n, c) float arrays count too
     for lo in range(0, m, step):
         cols = slice(lo, min(m, lo + step))
         order = np.argsort(times[:, cols], axis=0, kind="stable")  # (n, c): soonest first

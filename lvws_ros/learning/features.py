@@ -83,9 +83,12 @@ class GraphFeatures:
 
 
 class InstanceFeatures:
-    """What depends on the instance alone, computed once per run."""
+    """What depends on the instance alone, computed once per run. ``read``: the pair
+    features the model reads (its ``pair_features``); the busy-robot ones (past
+    TRAVEL_PAIR_FEATURES) are left zero for a model that does not read them."""
 
-    def __init__(self, inst: Instance) -> None:
+    def __init__(self, inst: Instance, read: int = PAIR_FEATURES) -> None:
+        self.read = read
         n, m = inst.num_robots, inst.num_tasks
         rc, tc = inst.robot_caps, inst.task_caps
         skills = list(inst.skill_columns)  # counts and rarity: skills only, not sites ("@...")
@@ -187,10 +190,12 @@ class InstanceFeatures:
             out[:, :-1, 5] = _squash(arrive)
             with np.errstate(invalid="ignore"):  # inf - inf where no free robot reaches j: never, 1
                 out[:, :-1, 6] = _squash(np.where(np.isfinite(arrive), arrive - first[None, :], np.inf))
-            soon_any = self.soonest(state, ready, np.where(free, 0.0, state.busy_remaining()))
-            soon_free = self.soonest(state, ready, np.where(free, 0.0, np.inf))
-            out[:, :-1, 7] = _squash(_later(arrive, soon_any[None, :]))
-            out[:, :-1, 8] = _squash(_later(soon_free, soon_any))[None, :]
+            if self.read > TRAVEL_PAIR_FEATURES:
+                soon_free = self.soonest(state, ready, np.where(free, 0.0, np.inf))
+                soon_any = soon_free if free.all() else \
+                    self.soonest(state, ready, np.where(free, 0.0, state.busy_remaining()))
+                out[:, :-1, 7] = _squash(_later(arrive, soon_any[None, :]))
+                out[:, :-1, 8] = _squash(_later(soon_free, soon_any))[None, :]
         return out
 
     def soonest(self, state: State, ready: npt.NDArray[np.int64],

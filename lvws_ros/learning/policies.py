@@ -67,7 +67,7 @@ class LVWSPolicy:
 
     def reset(self, instance: Instance) -> None:
         if self._cache is None or self._cache.instance is not instance:  # rollouts reset once per simulation
-            self._cache = InstanceFeatures(instance)
+            self._cache = InstanceFeatures(instance, self.model.cfg.pair_features)
 
     def outputs(self, state: State) -> tuple[np.ndarray, np.ndarray | None]:
         """R of Eq. 6 for this decision step, (free robots, ready tasks + idle task), and
@@ -139,7 +139,7 @@ class DBGMPolicy:
         self._cache: InstanceFeatures | None = None
 
     def reset(self, instance: Instance) -> None:
-        self._cache = InstanceFeatures(instance)
+        self._cache = InstanceFeatures(instance, self.model.cfg.pair_features)
 
     def decide(self, state: State) -> Decision:
         inst = state.instance

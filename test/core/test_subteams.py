@@ -5,6 +5,8 @@ are served."""
 
 from __future__ import annotations
 
+from unittest.mock import patch
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -60,6 +62,9 @@ def test_earliest_cover_is_the_first_time_the_robots_there_cover_the_task(case, 
     rev = t[::-1]
     assert got[1] == next((x for x in finite if covers(caps[rev <= x], payloads[rev <= x], need, need_payload)),
                           np.inf)  # the same robots at other times
+    with patch("lvws_ros.core.subteams.COVER_CHUNK", 1):  # one task per chunk: the same
+        assert np.array_equal(earliest_cover(np.stack([t, t[::-1]], axis=1), caps, payloads, np.stack([need, need]),
+                                             np.array([need_payload, need_payload])), got)
 
 
 def test_the_lightest_cover_is_the_lightest_minimal_subteam_almost_always():

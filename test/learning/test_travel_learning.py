@@ -82,34 +82,46 @@ def test_travel_pair_features_are_arrival_times_and_zero_without_travel():
 
 
 def test_busy_robot_pair_features_see_a_task_that_starts_sooner_by_waiting_for_a_busy_robot():
-    """A welder is busy at site a for 2 s more; the free one is 10 s away. Waiting for
-    the busy one starts the next weld at a 8 s sooner: the free welder's feature 7 (later
-    than the earliest start) and the column's feature 8 (the free robots' start later than
-    the earliest) both say 8 s; the free carrier at a, who cannot weld, changes neither."""
+    """A welder-painter is busy until t = 2 on a task that leaves it at c, 4 s from a; the
+    free welder is 10 s from a and the welding arm is fixed at b. Waiting for the busy one
+    starts the weld at a at 6 instead of 10: the free welder's feature 7 (later than the
+    earliest start) and the column's feature 8 (free robots' start later than the
+    earliest) both say 4 s; the free carrier at a, who cannot weld, is not later than the
+    earliest start, but its column says wait too. Only the busy robot paints: feature 8 is
+    1 (free robots never cover it). A model reading 7 pair features gets zeros there."""
     inst = instance_from_dict({
-        "format": "lvws-instance/1", "name": "busy-welder", "capabilities": ["weld", "carry"],
-        "sites": {"a": [0.0, 0.0], "b": [10.0, 0.0]},
-        "robots": [{"id": "near", "capabilities": [1, 0], "payload": 1.0, "site": "a", "speed": 1.0},
-                   {"id": "far", "capabilities": [1, 0], "payload": 1.0, "site": "b", "speed": 1.0},
-                   {"id": "carrier", "capabilities": [0, 1], "payload": 1.0, "site": "a", "speed": 1.0}],
-        "tasks": [{"id": "w1", "capabilities": [1, 0], "payload": 0.0, "duration": 2.0, "after": [], "site": "a"},
-                  {"id": "w2", "capabilities": [1, 0], "payload": 0.0, "duration": 4.0, "after": [], "site": "a"}]})
+        "format": "lvws-instance/1", "name": "busy-welder", "capabilities": ["weld", "carry", "paint"],
+        "sites": {"a": [0.0, 0.0], "b": [10.0, 0.0], "c": [0.0, 4.0]},
+        "robots": [{"id": "near", "capabilities": [1, 0, 1], "payload": 1.0, "site": "a", "speed": 1.0},
+                   {"id": "far", "capabilities": [1, 0, 0], "payload": 1.0, "site": "b", "speed": 1.0},
+                   {"id": "carrier", "capabilities": [0, 1, 0], "payload": 1.0, "site": "a", "speed": 1.0},
+                   {"id": "arm", "capabilities": [1, 0, 0], "payload": 1.0, "site": "b"}],
+        "tasks": [{"id": "w1", "capabilities": [1, 0, 0], "payload": 0.0, "duration": 2.0, "after": [], "from": "a",
+                   "to": "c"},
+                  {"id": "w2", "capabilities": [1, 0, 0], "payload": 0.0, "duration": 4.0, "after": [], "site": "a"},
+                  {"id": "p3", "capabilities": [0, 0, 1], "payload": 0.0, "duration": 3.0, "after": [], "site": "a"}]})
     state = State.initial(inst)
-    state.start(0, [0])  # "near" welds w1 until t = 2
+    state.start(0, [0])  # "near" does w1 until t = 2 and is then at c
     state.refresh()
     feats = InstanceFeatures(inst).encode(state)
-    assert list(feats.rows) == [1, 2] and len(feats.cols) == 2  # w2, then the idle column
+    assert list(feats.rows) == [1, 2, 3] and len(feats.cols) == 3  # w2, p3, then the idle column
     unit = 3.0  # mean duration
 
     def squash(x: float) -> float:
         return x / (1 + x)
 
-    far, carrier = feats.pairs[0, 0], feats.pairs[1, 0]
-    assert far[5] == pytest.approx(squash(10 / unit)) and far[6] == pytest.approx(squash(10 / unit))
-    assert far[7] == pytest.approx(squash(8 / unit)) and far[8] == pytest.approx(squash(8 / unit))
-    assert carrier[8] == far[8] and carrier[7] == 0.0  # there at once, but no welder: only the column says wait
+    far, carrier, arm = feats.pairs[0], feats.pairs[1], feats.pairs[2]
+    assert far[0, 5] == pytest.approx(squash(10 / unit)) and far[0, 6] == pytest.approx(squash(10 / unit))
+    assert far[0, 7] == pytest.approx(squash(4 / unit)) and far[0, 8] == pytest.approx(squash(4 / unit))
+    assert carrier[0, 8] == far[0, 8] and carrier[0, 7] == 0.0  # there at once, not later than the earliest start
+    assert arm[0, 5] == 1.0 and arm[0, 7] == 1.0  # fixed at b: never at a
+    assert np.all(feats.pairs[:, 1, 8] == 1.0)  # p3: only the busy robot paints
+    assert np.all(feats.pairs[:, -1] == 0)  # the idle column
     at_start = InstanceFeatures(inst).encode(State.initial(inst)).pairs  # nobody busy: nothing sooner by waiting
     assert np.all(at_start[:, :-1, 8] == 0)
+    older = InstanceFeatures(inst, read=TRAVEL_PAIR_FEATURES).encode(state).pairs
+    assert np.array_equal(older[..., :TRAVEL_PAIR_FEATURES], feats.pairs[..., :TRAVEL_PAIR_FEATURES])
+    assert np.all(older[..., TRAVEL_PAIR_FEATURES:] == 0)
 
 
 @pytest.mark.parametrize("make", [LVWSPolicy, DBGMPolicy, lambda: LVWSRolloutPolicy(budget_ms=200)])
