@@ -37,11 +37,15 @@ setting out when its time left is over from where its task ends: how much later 
 arrives than the earliest a subteam covering j can be there (Eqs. 10-11), and (the same
 for the whole column) how much later that earliest subteam is with free robots only,
 both squashed the same way (0: nobody sooner). They tell the network when holding a
-task back for busy robots pays. A ``lvws-gatn/2`` checkpoint reads the first LEGACY_PAIR_FEATURES only, a
-``lvws-gatn/3`` one the first TRAVEL_PAIR_FEATURES.
+task back for busy robots pays. A robot that is not available but has no time left
+(the online scheduler gives it BUSY_EPS, ``core/online.py``) counts as back in a
+moment. A ``lvws-gatn/2`` checkpoint reads the first LEGACY_PAIR_FEATURES only, a
+``lvws-gatn/3`` one the first TRAVEL_PAIR_FEATURES (the busy-robot ones are then not
+computed).
 
-Cost per decision step: O(N K + T + E + R C K), and O(N C (K + log N)) more with travel, with T the
-tasks not done, E their DAG edges, R the free robots and C the ready tasks; what depends on the instance alone is
+Cost per decision step: O(N K + T + E + R C K), and O(N C (K + log N)) more with travel
+for ``lvws-gatn/4``, with T the tasks not done, E their DAG edges, R the free robots and
+C the ready tasks; what depends on the instance alone is
 computed once (:class:`InstanceFeatures`).
 """
 
