@@ -103,7 +103,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     if warm_up:
         node_latency(policy, family, 10, 20, seed + 1, warm_up=False)
     from lvws_ros.core.executor import State, TaskStatus
-    from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot
+    from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot, graph_sites
     from lvws_ros.registry import make_policy
     from lvws_ros.ros import convert
 
@@ -113,8 +113,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     state = State.initial(inst)
     names = tuple(inst.capabilities)
     tr = inst.travel  # with travel, the snapshots carry sites as the simulator's do (sim/world.py)
-    sites = () if tr is None else tuple((s, x, y) for s, (x, y) in zip(tr.sites, tr.coordinates, strict=True))
-    distances = () if tr is None else tuple(float(d) for d in tr.distance.reshape(-1))
+    sites = ((), ()) if tr is None else graph_sites(tr)
 
     def where(r: int) -> tuple[str, float]:  # a busy robot: where its task leaves it
         if tr is None or state.robot_site is None:
@@ -135,7 +134,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
             TaskInfo(t.id, int(state.task_status[j]), t.capabilities, t.payload, t.duration, t.after,
                      tuple(inst.robots[r].id for r in state.task_team[j]),
                      None if np.isnan(state.task_start[j]) else float(state.task_start[j]), None, *task_sites(j))
-            for j, t in enumerate(inst.tasks)), sites, distances)
+            for j, t in enumerate(inst.tasks)), *sites)
         team_msg, graph_msg = convert.team_to_msg(team), convert.graph_to_msg(graph)
         t0 = time.perf_counter()
         online.offer_team(convert.team_from_msg(team_msg))

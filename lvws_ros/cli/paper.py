@@ -34,7 +34,7 @@ from lvws_ros.core.formats import instance_key
 from lvws_ros.core.metrics import ExpertRecord, RunRecord, run_policy, suboptimality
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
-from lvws_ros.learning.features import LEGACY_PAIR_FEATURES, TRAVEL_PAIR_FEATURES
+from lvws_ros.learning.features import LEGACY_PAIR_FEATURES, MODEL_FORMATS
 from lvws_ros.registry import make_policy
 
 POLICIES = ("rand", "rand_subteam", "grp", "dbgm", "lvws", "lvws_rollout")
@@ -140,10 +140,9 @@ _TRAVEL_NOTE = {"lvws-gatn/3": "; travel pair features",
 
 
 def _model_format(meta: dict[str, Any]) -> str:
-    """lvws-gatn/4, /3 or /2 by the pair features the model reads (busy robots, travel, none)."""
+    """The model format (features.MODEL_FORMATS) by the pair features the model reads."""
     read = meta.get("train_config", {}).get("model", {}).get("pair_features", LEGACY_PAIR_FEATURES)
-    return "lvws-gatn/4" if read > TRAVEL_PAIR_FEATURES else "lvws-gatn/3" if read > LEGACY_PAIR_FEATURES \
-        else "lvws-gatn/2"
+    return MODEL_FORMATS.get(read, f"lvws-gatn reading {read} pair features")
 
 
 def _table1(cols: dict[str, Column], policies: Sequence[str]) -> list[str]:

@@ -245,6 +245,13 @@ def robot_site(robot: RobotInfo, known: set[str] | frozenset[str], n: int = 0) -
     return off_site(robot)
 
 
+def graph_sites(tr: Travel) -> tuple[tuple[tuple[str, float, float], ...], tuple[float, ...]]:
+    """The TaskGraph's ``sites`` and ``distances`` (row-major) of a travel model: the
+    inverse of :func:`snapshot_travel` for the sites."""
+    return (tuple((name, x, y) for name, (x, y) in zip(tr.sites, tr.coordinates, strict=True)),
+            tuple(float(d) for d in tr.distance.reshape(-1)))
+
+
 def snapshot_travel(team: TeamSnapshot, graph: GraphSnapshot) -> Travel:
     """The travel of the snapshots: the graph's sites (plus one at the pose of each mobile
     robot off every site), each robot at its site, each task at its sites."""

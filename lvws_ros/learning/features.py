@@ -65,6 +65,8 @@ TASK_FEATURES = 17
 PAIR_FEATURES = 9
 LEGACY_PAIR_FEATURES = 5  # lvws-gatn/2: no travel features
 TRAVEL_PAIR_FEATURES = 7  # lvws-gatn/3: travel features of free robots only
+MODEL_FORMATS = {LEGACY_PAIR_FEATURES: "lvws-gatn/2",  # the network's format by the pair features it reads
+                 TRAVEL_PAIR_FEATURES: "lvws-gatn/3", PAIR_FEATURES: "lvws-gatn/4"}
 CAP_COUNT = 10.0  # "fewest robots" saturates here
 
 F32 = npt.NDArray[np.float32]

@@ -40,6 +40,7 @@ from torch import Tensor, nn
 
 from lvws_ros.learning.features import (
     LEGACY_PAIR_FEATURES,
+    MODEL_FORMATS,
     PAIR_FEATURES,
     ROBOT_FEATURES,
     TASK_FEATURES,
@@ -47,7 +48,7 @@ from lvws_ros.learning.features import (
 )
 
 NEG = -1e9  # masked logits
-MODEL_FORMAT = "lvws-gatn/4"  # /3: travel pair features of free robots only; /2: none (no pair_features)
+MODEL_FORMAT = MODEL_FORMATS[PAIR_FEATURES]
 ENTRY_CHUNK = 1 << 18  # reward entries per chunk at inference: bounds memory at fleet scale
 INFERENCE_THREADS = 1
 ROW_CHUNK = 256  # attending robots per chunk of the dense robot GAT

@@ -40,7 +40,7 @@ import numpy as np
 import pymunk
 
 from lvws_ros.core.executor import TaskStatus
-from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot
+from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot, graph_sites
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import shortfall
@@ -565,9 +565,7 @@ class CellSim:
                                   self.team.get(t.id, ()), self.start.get(t.id), self.end.get(t.id), *sites))
         if tr is None:
             return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks))
-        return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks),
-                             tuple((name, x, y) for name, (x, y) in zip(tr.sites, tr.coordinates, strict=True)),
-                             tuple(float(d) for d in tr.distance.reshape(-1)))
+        return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks), *graph_sites(tr))
 
     # -- results ----------------------------------------------------------------------
     def executed_instance(self) -> Instance:
