@@ -13,14 +13,15 @@ from lvws_ros.errors import PolicyError
 
 __all__ = ["LEARNED_POLICIES", "POLICY_NAMES", "make_policy"]
 
-POLICY_NAMES = ("lvws", "lvws_rollout", "dbgm", "grp", "rand", "rand_subteam", "exact")
-LEARNED_POLICIES = ("lvws", "lvws_rollout", "dbgm")  # take a model_path
+POLICY_NAMES = ("lvws", "lvws_rollout", "lvws_beam", "dbgm", "grp", "rand", "rand_subteam", "exact")
+LEARNED_POLICIES = ("lvws", "lvws_rollout", "lvws_beam", "dbgm")  # take a model_path
 
 
 def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     """A policy by its name. ``options``: ``time_limit``/``workers`` for ``exact``,
     ``model_path`` for the learned ones (empty or None: the shipped checkpoint),
-    ``budget_ms`` for ``lvws_rollout`` (per decision step; None: no budget)."""
+    ``budget_ms`` for ``lvws_rollout`` (per decision step) and ``lvws_beam`` (per search;
+    None: no budget), ``width`` for ``lvws_beam``."""
     if name == "grp":
         from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
@@ -41,5 +42,10 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
             "lvws": LVWSPolicy, "dbgm": DBGMPolicy, "lvws_rollout": LVWSRolloutPolicy}
         if name == "lvws_rollout":
             return LVWSRolloutPolicy(model_path=model_path, budget_ms=options.get("budget_ms"))
+        if name == "lvws_beam":
+            from lvws_ros.learning.search import DEFAULT_WIDTH, LVWSBeamPolicy
+
+            return LVWSBeamPolicy(model_path=model_path, budget_ms=options.get("budget_ms"),
+                                  width=options.get("width", DEFAULT_WIDTH))
         return kinds[name](model_path=model_path)
     raise PolicyError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")

@@ -39,7 +39,9 @@ from lvws_ros.registry import make_policy
 
 POLICIES = ("rand", "rand_subteam", "grp", "dbgm", "lvws", "lvws_rollout")
 LABELS = {"rand": "RAND", "rand_subteam": "RAND w/ subteams", "grp": "GRP", "dbgm": "DBGM", "lvws": "LVWS",
-          "lvws_rollout": "LVWS + rollout (ours, beyond the paper)"}
+          "lvws_rollout": "LVWS + rollout (ours, beyond the paper)",
+          "lvws_beam": "LVWS + beam search (ours, beyond the paper)"}
+SEARCH_POLICIES = ("lvws_beam",)  # Table III only (issue #15's search target): minutes per instance on Tables I-II
 PAPER_TABLE_I = {  # suboptimality %, (6r-18t, 8r-20t-var); None: "—" in the paper
     "rand": (23.00, None), "rand_subteam": (11.80, 18.04), "grp": (15.80, 19.93),
     "dbgm": (13.80, None), "lvws": (0.80, 13.81), "lvws_rollout": (None, None),
@@ -107,6 +109,8 @@ def _header(meta: dict[str, Any], seconds: float, data_seed: int, policy_seed: i
 
 
 def _training_section(meta: dict[str, Any]) -> list[str]:
+    from lvws_ros.learning.search import DEFAULT_WIDTH
+
     lv = meta["lvws"]
     return [
         "",
@@ -132,6 +136,12 @@ def _training_section(meta: dict[str, Any]) -> list[str]:
         "without one free robot (who waits); LVWS and GRP each finish the schedule from every candidate and the "
         "candidate with the shortest finish wins. The candidate set was chosen on the validation split with our "
         "first model (lvws-model/1) and not tuned again.",
+        "",
+        f"LVWS + beam search (ours, beyond the paper; Table III only): the {DEFAULT_WIDTH} best partial schedules "
+        "of each depth are kept; a node's children are the rollout's candidates and each ready task started "
+        "alone by the subteam LVWS's rewards match to it, scored by the better of LVWS's and GRP's finishes; "
+        "the shortest schedule any finish reached is followed (`lvws_ros/learning/search.py`). The width and "
+        "the single-task candidates were chosen on the validation split of Dataset IV.",
     ]
 
 
@@ -217,7 +227,8 @@ def _table3(cols: dict[str, Column], policies: Sequence[str]) -> list[str]:
              + "; ".join(f"{k}: {FAMILIES[k].description.removeprefix('held out, ')}" for k in keys if k in FAMILIES)
              + " (`lvws_ros/core/families.py`). The travel extension of formats.md; rule 7 is checked on every "
              "schedule. The exact expert models travel as the executor does (`lvws_ros/policies/exact.py`). "
-             "Targets of the issue, on Dataset IV: LVWS <= 5 %, search (LVWS + rollout) <= 2 %.", "",
+             "Targets of the issue, on Dataset IV: LVWS <= 5 %, search (LVWS + rollout or beam search) <= 2 %.",
+             "",
              "| Method | " + " | ".join(f"{k}{' (held out)' if k in FAMILIES else ''}" for k in keys) + " |",
              "|---|" + "---|" * len(keys)]
     for p in policies:
@@ -228,6 +239,10 @@ def _table3(cols: dict[str, Column], policies: Sequence[str]) -> list[str]:
         bad = {p: n for p in policies if (n := mean_suboptimality(cols[k], p)[2])}
         lines.append(f"- {k}: {sum(e.status == 'optimal' for e in ex)}/{len(ex)} optima proven (suboptimality "
                      "over those)" + (f"; invalid runs {bad}" if bad else "") + ".")
+    if searches := [p for p in policies if p in ("lvws_rollout", *SEARCH_POLICIES)]:
+        lines.append("- Compute per instance (mean, seconds): " + "; ".join(
+            f"{LABELS[p]} " + ", ".join(f"{k} {statistics.fmean(r.compute_seconds for r in cols[k].runs[p]):.2f}"
+                                       for k in keys) for p in searches) + ".")
     return lines
 
 
@@ -293,6 +308,8 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
         raise PolicyError(f"the paper's tables compare {', '.join(POLICIES)}; got {list(policies)}")
     runners = {p: make_policy(p, seed=policy_seed) for p in policies}
     table_runners = dict(runners)
+    travel_runners = {**table_runners, **({p: make_policy(p, seed=policy_seed) for p in SEARCH_POLICIES}
+                                          if "lvws_rollout" in policies else {})}
     if "lvws" in policies:  # the voluntary-waiting ablation
         from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, LVWSPolicy
 
@@ -319,7 +336,7 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
     cols4 = {}
     for key, insts4 in travel_sets.items():
         log(f"Table III, {key} (travel): {len(insts4)} test instances")
-        cols4[key] = run_column(insts4, table_runners, cache_dir / f"expert-{key}-s{data_seed}.json", time_limit,
+        cols4[key] = run_column(insts4, travel_runners, cache_dir / f"expert-{key}-s{data_seed}.json", time_limit,
                                 workers, progress)
     meta = {k: load_checkpoint(DEFAULT_MODELS[k])[1] for k in ("lvws", "dbgm")}
     sample = min(limit or EXPERT_WAIT_SAMPLE, EXPERT_WAIT_SAMPLE)
@@ -332,7 +349,7 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
         *_table1(cols, policies),
         *_family_table(cols, policies),
         *_table2(col3, policies, table2_time_limit),
-        *_table3(cols4, policies),
+        *_table3(cols4, list(travel_runners)),
         *_decision_times(cols["I"], policies),
         *_waiting_section(cols, policies, shares, sample),
         *(_waiting_ablation(cols, meta) if "lvws" in policies else []),

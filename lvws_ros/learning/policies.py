@@ -86,11 +86,13 @@ class LVWSPolicy:
 
     def match(self, state: State, r: np.ndarray, subset: list[int] | None = None,
               idle_bias: float | None = None, wait: np.ndarray | None = None,
-              wait_threshold: float | None = None) -> Decision:
+              wait_threshold: float | None = None, only: int | None = None) -> Decision:
         """Eqs. 7-11 on ``r`` (rows: the free robots, columns: the ready tasks, then the
         idle task), for the free robots in ``subset`` (default: all of them). With ``wait``
         (the free robots' wait probabilities) and a threshold (``wait_threshold``, else the
-        policy's), the robots above it wait and the others are matched."""
+        policy's), the robots above it wait and the others are matched. With ``only`` (a
+        ready task), that task alone is matched, without voluntary waiting, and the other
+        robots wait."""
         inst = state.instance
         ready, free = state.ready_tasks(), state.free_robots()
         robots = free if subset is None else subset
@@ -108,12 +110,17 @@ class LVWSPolicy:
                 # waiting now would stall: match them all as without the head
         sub = r[[row_of[i] for i in robots]].copy()
         bias = self.idle_bias if idle_bias is None else idle_bias
-        if bias <= NO_VOLUNTARY_WAIT:
+        if bias <= NO_VOLUNTARY_WAIT or only is not None:
             _idle_last(sub)
         else:
             sub[:, -1] += bias
+        allowed = reachable(state, robots, ready)
+        if only is not None:
+            alone = np.zeros((len(robots), len(ready)), dtype=bool)
+            alone[:, ready.index(only)] = True
+            allowed = alone if allowed is None else allowed & alone
         args = (inst.robot_caps[robots], inst.robot_payload[robots], inst.task_caps[ready], inst.task_payload[ready],
-                reachable(state, robots, ready))
+                allowed)
         match = greedy_match(sub, *args)
         if not match.teams and not (state.task_status == TaskStatus.ASSIGNED).any():
             _idle_last(sub)  # waiting now would stall: take the best task instead
@@ -182,7 +189,7 @@ class OutOfTime(Exception):
     """A continuation passed its deadline (the rollout's budget)."""
 
 
-class _Until:
+class Until:
     """``policy`` that raises OutOfTime at its first decision past ``deadline`` (perf_counter)."""
 
     def __init__(self, policy: Policy, deadline: float) -> None:
@@ -212,7 +219,7 @@ def continue_after(state: State, decision: Decision, policy: Policy, deadline: f
     s.refresh()
     if s.done():
         return float(np.nanmax(s.task_end))
-    runner = policy if deadline is None else _Until(policy, deadline)
+    runner = policy if deadline is None else Until(policy, deadline)
     return float(simulate(state.instance, runner, state=s).schedule.makespan)
 
 
@@ -224,7 +231,8 @@ class LVWSRolloutPolicy:
     it); with a wait head, the matchings with its waits at ``wait_thresholds``; GRP's
     matching; with ``hold_back``, LVWS's matching with one of its subteams
     told to wait; with ``exclude``, LVWS's matching redone without one free robot (who
-    waits). Each candidate is scored by the makespan reached when LVWS finishes the
+    waits); with ``single_tasks``, each ready task started alone, by the subteam LVWS's
+    rewards match to it, every other free robot waiting. Each candidate is scored by the makespan reached when LVWS finishes the
     schedule from there (and GRP, with ``finish_with_grp``: the better of the two), and
     the shortest wins, LVWS's own on ties. Never worse than LVWS alone on the executor's
     model, at the price of one or two simulated schedules per distinct candidate and step.
@@ -241,7 +249,7 @@ class LVWSRolloutPolicy:
     def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
                  wait_biases: tuple[float, ...] = (-0.2, -0.1, 0.0), hold_back: bool = True,
                  exclude: bool = True, finish_with_grp: bool = True, budget_ms: float | None = None,
-                 wait_thresholds: tuple[float, ...] = (0.8, 0.5)) -> None:
+                 wait_thresholds: tuple[float, ...] = (0.8, 0.5), single_tasks: bool = False) -> None:
         if model is None:
             model, meta = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["lvws"])
             base_bias = float(meta.get("idle_bias", NO_VOLUNTARY_WAIT))
@@ -251,6 +259,7 @@ class LVWSRolloutPolicy:
         self.base = LVWSPolicy(model=model, idle_bias=base_bias, wait_threshold=threshold)
         self.wait_biases, self.wait_thresholds = wait_biases, wait_thresholds
         self.hold_back, self.exclude, self.finish_with_grp = hold_back, exclude, finish_with_grp
+        self.single_tasks = single_tasks
         self.grp = GreedyPayloadPolicy()
         self.budget_ms = budget_ms
 
@@ -279,6 +288,8 @@ class LVWSRolloutPolicy:
                     break
                 d = self.base.match(state, r, [i for i in free if i != x])  # x waits
                 proposals.append(Decision(d.assignments, tuple(sorted({x, *d.waiting}))))
+        if self.single_tasks:
+            proposals += [d for task in state.ready_tasks() if (d := self.base.match(state, r, only=task)).assignments]
         out = [first]
         seen = {frozenset(first.assignments)}
         for d in proposals:

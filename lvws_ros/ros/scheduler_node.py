@@ -79,6 +79,8 @@ class Param:
         return d
 
 
+BEAM_BUDGET_MS = 1000.0  # lvws_beam's search budget when decision_budget_ms is 0
+
 PARAMETERS: dict[str, Param] = {
     "policy": Param(str, DEFAULT_POLICY, f"scheduling policy: {' | '.join(POLICY_NAMES)}"),
     "fallback_policy": Param(str, "grp", "decides a step the main policy cannot serve (WARN on diagnostics); "
@@ -86,7 +88,8 @@ PARAMETERS: dict[str, Param] = {
     "model_path": Param(str, "", "checkpoint of a learned policy; '' for the shipped one"),
     "seed": Param(int, 0, "seed of the random policies", 0, 2**31 - 1),
     "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (lvws_rollout, "
-                                            "exact) in ms; 0: their own limits", 0.0, 3.6e6),
+                                            "lvws_beam, exact) in ms; 0: their own limits (lvws_beam: "
+                                            f"{BEAM_BUDGET_MS:g} ms)", 0.0, 3.6e6),
     "ack_timeout": Param(float, 5.0, "seconds before an assignment the world did not take is offered again",
                          0.01, 3600.0),
     "expect_subscribers": Param(int, 0, "the first decision waits (at most 20 s) until this many nodes subscribe "
@@ -156,6 +159,8 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
         options["model_path"] = values["model_path"]
     if name == "lvws_rollout" and budget > 0:
         options["budget_ms"] = budget
+    if name == "lvws_beam":  # a search without a budget could hold a large cell for minutes
+        options["budget_ms"] = budget if budget > 0 else BEAM_BUDGET_MS
     if name == "exact" and budget > 0:
         options["time_limit"] = budget / 1000
     fallback = values["fallback_policy"]

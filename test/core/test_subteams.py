@@ -92,7 +92,7 @@ def test_a_task_needing_seventeen_robots_and_forty_robot_teams_are_scheduled_by_
     tasks = (Task("big", (1, 0), 17.0, 3.0), Task("wide", (1, 1), 12.0, 2.0, ("big",)),
              Task("small", (0, 1), 1.0, 1.0))
     inst = Instance("fleet", ("lift", "drive"), robots, tasks)
-    for name in ("grp", "rand", "rand_subteam", "exact", "lvws", "dbgm", "lvws_rollout"):
+    for name in ("grp", "rand", "rand_subteam", "exact", "lvws", "dbgm", "lvws_rollout", "lvws_beam"):
         sched = simulate(inst, make_policy(name, **({"workers": 2, "time_limit": 30} if name == "exact" else {})))
         assert check_schedule(inst, sched.schedule) == [], name
         assert len(sched.schedule.by_task()["big"].robots) == 17, name

@@ -27,7 +27,7 @@ def test_wide_instances_past_the_old_dense_limit_schedule(name):
     assert check_schedule(inst, sched) == [] and sched.makespan == m // n
 
 
-@pytest.mark.parametrize("name", ["lvws", "dbgm", "lvws_rollout"])
+@pytest.mark.parametrize("name", ["lvws", "dbgm", "lvws_rollout", "lvws_beam"])
 def test_the_largest_legal_numbers_give_valid_schedules(name):
     doc = copy.deepcopy(BASE)
     for r in doc["robots"]:

@@ -53,7 +53,7 @@ def test_checkpoint_load_paths_refuse_the_payload(crafted):
     for load in (read_checkpoint, load_checkpoint):
         with pytest.raises(ModelError, match=r"crafted\.pt"):
             load(pt)
-    for name in ("lvws", "dbgm", "lvws_rollout"):
+    for name in ("lvws", "dbgm", "lvws_rollout", "lvws_beam"):
         with pytest.raises(ModelError):
             make_policy(name, model_path=str(pt))
     with pytest.raises(ModelError):

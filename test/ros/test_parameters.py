@@ -128,3 +128,14 @@ def test_a_float_parameter_given_an_int_is_refused_with_a_clear_message(tmp_path
     out = subprocess.run([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", "-p", "ack_timeout:=5"],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "parameter ack_timeout" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_the_scheduler_node_gives_the_beam_a_budget_unless_told_one():
+    from lvws_ros.learning.search import LVWSBeamPolicy
+    from lvws_ros.ros.scheduler_node import BEAM_BUDGET_MS, build_policies
+
+    values = {"policy": "lvws_beam", "decision_budget_ms": 0.0, "model_path": "", "fallback_policy": "grp", "seed": 0}
+    main, fallback = build_policies(values)
+    assert isinstance(main, LVWSBeamPolicy) and main.budget_ms == BEAM_BUDGET_MS and fallback is not None
+    main, _ = build_policies({**values, "decision_budget_ms": 250.0})
+    assert isinstance(main, LVWSBeamPolicy) and main.budget_ms == 250.0

@@ -1,0 +1,170 @@
+"""Beam search over LVWS (ours, beyond the paper): the ``lvws_beam`` policy.
+
+The one-step rollout (:class:`~lvws_ros.learning.policies.LVWSRolloutPolicy`) commits to
+the best candidate of each decision step as LVWS and GRP would finish the schedule from
+it. Beam search keeps the ``width`` best partial schedules of each depth instead of one:
+
+* a node is an executor state at a decision step, reached by a path of decisions from
+  the state the search started in;
+* its children are the rollout's candidates in that state (LVWS's matching, its learned
+  waits, GRP's matching, a subteam held back, a robot left out) and each ready task
+  started alone by the subteam LVWS's rewards match to it; each child is advanced to its
+  next decision step and scored by the makespan LVWS and GRP reach when they finish the
+  schedule from it (the better of the two);
+* the ``width`` best-scored distinct children of all nodes form the next depth, until
+  every path has finished.
+
+Every finish simulated along the way is a complete, valid schedule; the search returns
+the shortest (the first found on ties: LVWS's own schedule, then GRP's, are among the
+first), as the decisions of every step to its end, and the policy follows them. It is
+therefore never worse than LVWS or GRP alone on the executor's model. When the world
+departs from the plan (a step at another time, other free robots or ready tasks: online
+use with failures, late tasks or a real simulator), the policy searches again from the
+state it is in.
+
+``budget_ms`` (anytime): a search stops when its budget is spent, a finish still running
+then is abandoned, and the best schedule found so far is followed; when none was found
+the step is LVWS's own decision and the next step searches again. None: no budget.
+Cost without a budget: about ``width`` x candidates x 2 simulated finishes per decision
+step of the plan (measured figures: README and ``docs/results.md``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lvws_ros.core.executor import Decision, Policy, State, simulate
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.subteams import TOLERANCE
+from lvws_ros.errors import PolicyError
+from lvws_ros.learning.gatn import GATN
+from lvws_ros.learning.policies import LVWSRolloutPolicy, OutOfTime, Until
+
+DEFAULT_WIDTH = 8
+
+
+@dataclass(frozen=True)
+class PlannedStep:
+    """One decision step of a plan: when, whom it expects free and ready, and what it decides."""
+
+    time: float
+    free: tuple[int, ...]
+    ready: tuple[int, ...]
+    decision: Decision
+
+
+def _step(state: State, decision: Decision) -> PlannedStep:
+    return PlannedStep(state.time, tuple(state.free_robots()), tuple(state.ready_tasks()), decision)
+
+
+def advance(state: State, decision: Decision) -> State | None:
+    """The state at the next decision step after ``decision`` (as :func:`simulate` moves
+    on), None if the decision would stall the schedule."""
+    s = state.copy()
+    for task, team in decision.assignments:
+        s.start(task, team)
+    nxt = s.next_event_time()
+    if nxt is None:
+        return None
+    s.time, s.step = nxt, s.step + 1
+    s.refresh()
+    return s
+
+
+def _key(s: State) -> tuple[bytes, bytes, tuple[tuple[int, ...], ...], float]:
+    """States reached by different paths that are the same state."""
+    return s.task_status.tobytes(), np.nan_to_num(s.task_start, nan=-1.0).tobytes(), tuple(map(tuple, s.task_team)), s.time
+
+
+class LVWSBeamPolicy:
+    """Beam search over LVWS's candidate decisions (module docstring)."""
+
+    name = "lvws_beam"
+
+    def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
+                 width: int = DEFAULT_WIDTH, budget_ms: float | None = None) -> None:
+        if width < 1:
+            raise PolicyError(f"lvws_beam: the beam width must be at least 1, got {width}")
+        self.rollout = LVWSRolloutPolicy(model=model, model_path=model_path, single_tasks=True)
+        self.width, self.budget_ms = width, budget_ms
+        self._plan: deque[PlannedStep] = deque()
+        self._planned_for: Instance | None = None
+        self.planned_makespan = math.nan  # of the schedule the latest search found (nan: none)
+        self.searches = 0  # searches run since reset (1 when the world followed the plan)
+        self.fallbacks = 0  # steps decided by LVWS alone: the budget was spent before any schedule was found
+
+    def reset(self, instance: Instance) -> None:
+        self.rollout.reset(instance)
+        self._plan.clear()
+        self._planned_for, self.planned_makespan = None, math.nan
+        self.searches = self.fallbacks = 0
+
+    def _follows(self, state: State) -> bool:
+        if not self._plan or self._planned_for is not state.instance:
+            return False
+        p = self._plan[0]
+        return (abs(p.time - state.time) <= TOLERANCE and p.free == tuple(state.free_robots())
+                and p.ready == tuple(state.ready_tasks()))
+
+    def decide(self, state: State) -> Decision:
+        if not self._follows(state):
+            self._plan = deque(self.search(state))
+            self._planned_for = state.instance
+            self.searches += 1
+            if not self._plan:
+                self.fallbacks += 1
+                return self.rollout.base.decide(state)
+        return self._plan.popleft().decision
+
+    def _finishes(self, state: State, deadline: float | None) -> list[tuple[float, list[PlannedStep]]]:
+        """LVWS's and GRP's finishes from ``state``: (makespan, their steps)."""
+        out = []
+        for pol in (self.rollout.base, self.rollout.grp):
+            runner: Policy = pol if deadline is None else Until(pol, deadline)
+            res = simulate(state.instance, runner, state=state, record_states=False)
+            out.append((float(res.schedule.makespan),
+                        [PlannedStep(r.time, r.free_robots, r.ready_tasks, r.decision) for r in res.steps]))
+        return out
+
+    def search(self, state: State) -> list[PlannedStep]:
+        """The decisions, from ``state`` to the end, of the shortest schedule the search
+        finds (empty if the budget was spent before any)."""
+        deadline = None if self.budget_ms is None else time.perf_counter() + self.budget_ms / 1000
+        best, best_plan = math.inf, []
+        beam: list[tuple[State, list[PlannedStep]]] = [(state.copy(), [])]
+        try:
+            while beam:
+                children: dict[tuple[bytes, bytes, tuple[tuple[int, ...], ...], float],
+                               tuple[float, State, list[PlannedStep]]] = {}
+                for s, path in beam:
+                    for d in self.rollout.candidates(s, deadline):
+                        if deadline is not None and time.perf_counter() > deadline:
+                            raise OutOfTime
+                        child = advance(s, d)
+                        if child is None:
+                            continue
+                        here = [*path, _step(s, d)]
+                        finishes: list[tuple[float, list[PlannedStep]]]
+                        if child.done():
+                            finishes = [(float(np.nanmax(child.task_end)), [])]
+                        else:
+                            finishes = self._finishes(child, deadline)
+                        score = min(m for m, _ in finishes)
+                        for makespan, rest in finishes:
+                            if makespan < best - TOLERANCE:
+                                best, best_plan = makespan, [*here, *rest]
+                        key = _key(child)
+                        if not child.done() and (key not in children or score < children[key][0]):
+                            children[key] = (score, child, here)
+                ranked = sorted(children.values(), key=lambda c: c[0])  # stable: earlier candidates first on ties
+                beam = [(s, path) for _, s, path in ranked[: self.width]]
+        except OutOfTime:
+            pass
+        self.planned_makespan = best if best_plan else math.nan
+        return best_plan
