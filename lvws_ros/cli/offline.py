@@ -64,6 +64,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
         result.schedule.extra.update({"status": expert.status, "bound": expert.bound, "gap": expert.gap})
         print(f"exact: {expert.status}, makespan {expert.makespan:g}, bound {expert.bound:g}, "
               f"{expert.seconds:.2f} s", file=sys.stderr)
+    if fallbacks := getattr(policy, "fallbacks", 0):
+        print(f"{policy.name}: {fallbacks} of {len(result.steps)} steps decided by LVWS alone (the search budget "
+              "was spent before any schedule was found)", file=sys.stderr)
     if args.out:
         save_schedule(result.schedule, args.out)
     sys.stdout.write(dumps(schedule_to_dict(result.schedule)))
@@ -198,7 +201,7 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--workers", type=int, default=8, help="exact policy: CP-SAT workers")
     p.add_argument("--model", default=None, help="lvws/dbgm policy: checkpoint (default: the shipped one)")
     p.add_argument("--budget-ms", type=float, default=None,
-                   help="lvws_rollout: time budget per decision step [ms] (default: none)")
+                   help="lvws_rollout: time budget per decision step, lvws_beam: per search [ms] (default: none)")
     p.add_argument("--out", help="also write the schedule to this file")
 
     p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")

@@ -42,6 +42,18 @@ def test_solve_check_gantt(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
 
 
+def test_beam_search_solves_and_says_when_its_budget_left_it_to_lvws(tmp_path):
+    out = tmp_path / "beam.json"
+    res = lvws("solve", EXAMPLE, "--policy", "lvws_beam", "--out", out)
+    assert "decided by LVWS alone" not in res.stderr
+    assert lvws("check", EXAMPLE, out).stdout.startswith("valid")
+    rushed = lvws("solve", EXAMPLE, "--policy", "lvws_beam", "--budget-ms", "0")
+    assert "decided by LVWS alone" in rushed.stderr
+    lvws_own = lvws("solve", EXAMPLE, "--policy", "lvws")
+    assert json.loads(rushed.stdout)["makespan"] == json.loads(lvws_own.stdout)["makespan"]
+    assert json.loads(out.read_text())["makespan"] <= json.loads(lvws_own.stdout)["makespan"]
+
+
 def test_generate_and_evaluate(tmp_path):
     lvws("generate", "--dataset", "I", "--out", tmp_path / "ds", "--count", 804, "--quiet")
     assert len(list((tmp_path / "ds" / "test").glob("*.json"))) == 4
