@@ -290,6 +290,20 @@ def simulate(
     return SimulationResult(schedule_from_state(state, policy.name, len(steps), compute), steps)
 
 
+def advance(state: State, decision: Decision) -> State | None:
+    """The state at the next decision step after ``decision`` (as :func:`simulate` moves
+    on), None if the decision would stall the schedule."""
+    s = state.copy()
+    for task, team in decision.assignments:
+        s.start(task, team)
+    nxt = s.next_event_time()
+    if nxt is None:
+        return None
+    s.time, s.step = nxt, s.step + 1
+    s.refresh()
+    return s
+
+
 def schedule_from_state(state: State, policy: str, decisions: int = 0, compute: float = 0.0) -> Schedule:
     inst = state.instance
     out = [

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, simulate
+from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, advance, simulate
 from lvws_ros.core.matching import greedy_match
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
@@ -209,14 +209,9 @@ def continue_after(state: State, decision: Decision, policy: Policy, deadline: f
     """Makespan when ``decision`` is taken in ``state`` and ``policy`` runs the rest
     (inf if the decision would stall the schedule). OutOfTime when the continuation is
     still running at ``deadline`` (a time.perf_counter() value)."""
-    s = state.copy()
-    for task, team in decision.assignments:
-        s.start(task, team)
-    nxt = s.next_event_time()
-    if nxt is None:
+    s = advance(state, decision)
+    if s is None:
         return math.inf
-    s.time, s.step = nxt, s.step + 1
-    s.refresh()
     if s.done():
         return float(np.nanmax(s.task_end))
     runner = policy if deadline is None else Until(policy, deadline)

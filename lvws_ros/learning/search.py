@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, Policy, State, simulate
+from lvws_ros.core.executor import Decision, Policy, State, advance, simulate
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import PolicyError
@@ -61,20 +61,6 @@ class PlannedStep:
 
 def _step(state: State, decision: Decision) -> PlannedStep:
     return PlannedStep(state.time, tuple(state.free_robots()), tuple(state.ready_tasks()), decision)
-
-
-def advance(state: State, decision: Decision) -> State | None:
-    """The state at the next decision step after ``decision`` (as :func:`simulate` moves
-    on), None if the decision would stall the schedule."""
-    s = state.copy()
-    for task, team in decision.assignments:
-        s.start(task, team)
-    nxt = s.next_event_time()
-    if nxt is None:
-        return None
-    s.time, s.step = nxt, s.step + 1
-    s.refresh()
-    return s
 
 
 def _key(s: State) -> tuple[bytes, bytes, tuple[tuple[int, ...], ...], float]:
