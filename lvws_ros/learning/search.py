@@ -46,7 +46,7 @@ from lvws_ros.errors import PolicyError
 from lvws_ros.learning.gatn import GATN
 from lvws_ros.learning.policies import LVWSRolloutPolicy, OutOfTime, Until
 
-DEFAULT_WIDTH = 8
+DEFAULT_WIDTH = 32
 
 
 @dataclass(frozen=True)
