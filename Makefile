@@ -60,7 +60,7 @@ test: env lint
 demo: env
 	$(PY) -m lvws_ros.cli launch --bag-dir bags --out-dir out
 	@echo "Plans with and without travel, executed in the simulator (lvws sim --compare):"
-	$(PY) -m lvws_ros.cli sim --compare grp,lvws,exact
+	$(PY) -m lvws_ros.cli sim --compare grp,lvws,exact,lvws_beam
 
 # Property-based fuzzing of the file formats: 10^4 examples per property, counts printed.
 fuzz: env
