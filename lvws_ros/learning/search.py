@@ -16,8 +16,10 @@ it. Beam search keeps the ``width`` best partial schedules of each depth instead
 
 Every finish simulated along the way is a complete, valid schedule; the search returns
 the shortest (the first found on ties: LVWS's own schedule, then GRP's, are among the
-first), as the decisions of every step to its end, and the policy follows them. It is
-therefore never worse than LVWS or GRP alone on the executor's model. When the world
+first), as the decisions of every step to its end, and the policy follows them. Without
+a budget it is therefore never worse than LVWS or GRP alone on the executor's model
+(with one, never worse than LVWS once its own finish fits in the budget). A finish that
+cannot complete the schedule (it stalls) is left out of the search. When the world
 departs from the plan (a step at another time, other free robots or ready tasks: online
 use with failures, late tasks or a real simulator), the policy searches again from the
 state it is in.
@@ -34,12 +36,13 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, Policy, State, advance, simulate
+from lvws_ros.core.executor import Decision, Policy, State, advance, check_decision, simulate
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import PolicyError
@@ -92,15 +95,30 @@ class LVWSBeamPolicy:
         self.searches = self.fallbacks = 0
 
     def _follows(self, state: State) -> bool:
-        if not self._plan or self._planned_for is not state.instance:
+        """Whether the plan's next step is this state's: steps that start nothing and lie
+        behind the world's time are skipped (online, decisions come only when a robot is
+        freed or a task gets ready), and the step must still obey Eqs. 8-11 here."""
+        if self._planned_for is not state.instance:
+            return False
+        while self._plan and not self._plan[0].decision.assignments and self._plan[0].time < state.time - TOLERANCE:
+            self._plan.popleft()
+        if not self._plan:
             return False
         p = self._plan[0]
-        return (abs(p.time - state.time) <= TOLERANCE and p.free == tuple(state.free_robots())
-                and p.ready == tuple(state.ready_tasks()))
+        if (abs(p.time - state.time) > TOLERANCE or p.free != tuple(state.free_robots())
+                or p.ready != tuple(state.ready_tasks())):
+            return False
+        try:
+            check_decision(state, p.decision, self.name)
+        except PolicyError:  # e.g. a robot the plan sends is at another site than planned
+            return False
+        return True
 
     def decide(self, state: State) -> Decision:
         if not self._follows(state):
-            self._plan = deque(self.search(state))
+            self._plan.clear()  # a search that raises leaves no stale plan behind
+            self._planned_for = None
+            self._plan.extend(self.search(state))
             self._planned_for = state.instance
             self.searches += 1
             if not self._plan:
@@ -108,15 +126,19 @@ class LVWSBeamPolicy:
                 return self.rollout.base.decide(state)
         return self._plan.popleft().decision
 
-    def _finishes(self, state: State, deadline: float | None) -> list[tuple[float, list[PlannedStep]]]:
-        """LVWS's and GRP's finishes from ``state``: (makespan, their steps)."""
-        out = []
+    def _finishes(self, state: State, deadline: float | None) -> Iterator[tuple[float, list[PlannedStep]]]:
+        """LVWS's and GRP's finishes from ``state``, each as soon as it is done: (makespan,
+        their steps). A finish that cannot complete the schedule (PolicyError: it stalls,
+        e.g. online with a robot that is away with no task) is left out; OutOfTime past
+        ``deadline``."""
         for pol in (self.rollout.base, self.rollout.grp):
             runner: Policy = pol if deadline is None else Until(pol, deadline)
-            res = simulate(state.instance, runner, state=state, record_states=False)
-            out.append((float(res.schedule.makespan),
-                        [PlannedStep(r.time, r.free_robots, r.ready_tasks, r.decision) for r in res.steps]))
-        return out
+            try:
+                res = simulate(state.instance, runner, state=state, record_states=False)
+            except PolicyError:
+                continue
+            yield (float(res.schedule.makespan),
+                   [PlannedStep(r.time, r.free_robots, r.ready_tasks, r.decision) for r in res.steps])
 
     def search(self, state: State) -> list[PlannedStep]:
         """The decisions, from ``state`` to the end, of the shortest schedule the search
@@ -133,20 +155,20 @@ class LVWSBeamPolicy:
                         if deadline is not None and time.perf_counter() > deadline:
                             raise OutOfTime
                         child = advance(s, d)
-                        if child is None:
+                        if child is None or (key := _key(child)) in children:  # the same state: the same finishes
                             continue
                         here = [*path, _step(s, d)]
-                        finishes: list[tuple[float, list[PlannedStep]]]
+                        finishes: Iterator[tuple[float, list[PlannedStep]]]
                         if child.done():
-                            finishes = [(float(np.nanmax(child.task_end)), [])]
+                            finishes = iter([(float(np.nanmax(child.task_end)), [])])
                         else:
                             finishes = self._finishes(child, deadline)
-                        score = min(m for m, _ in finishes)
-                        for makespan, rest in finishes:
+                        score = math.inf
+                        for makespan, rest in finishes:  # the incumbent is kept finish by finish
+                            score = min(score, makespan)
                             if makespan < best - TOLERANCE:
                                 best, best_plan = makespan, [*here, *rest]
-                        key = _key(child)
-                        if not child.done() and (key not in children or score < children[key][0]):
+                        if not child.done() and math.isfinite(score):
                             children[key] = (score, child, here)
                 ranked = sorted(children.values(), key=lambda c: c[0])  # stable: earlier candidates first on ties
                 beam = [(s, path) for _, s, path in ranked[: self.width]]

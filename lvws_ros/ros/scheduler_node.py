@@ -164,8 +164,9 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
     if name == "exact" and budget > 0:
         options["time_limit"] = budget / 1000
     fallback = values["fallback_policy"]
+    backup = {"budget_ms": budget if budget > 0 else BEAM_BUDGET_MS} if fallback == "lvws_beam" else {}
     return (make_policy(name, seed=int(values["seed"]), **options),
-            make_policy(fallback, seed=int(values["seed"])) if fallback else None)
+            make_policy(fallback, seed=int(values["seed"]), **backup) if fallback else None)
 
 
 class SchedulerNode(Node):

@@ -11,7 +11,8 @@ import pytest
 import torch
 
 from lvws_ros.core.datasets import DATASETS, dataset_instance, random_instance
-from lvws_ros.core.executor import check_decision, simulate
+from lvws_ros.core.executor import State, check_decision, simulate
+from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import PolicyError
 from lvws_ros.learning.gatn import GATN, GATNConfig
@@ -68,10 +69,26 @@ def test_the_beam_searches_again_when_the_world_departs_from_its_plan(small_mode
     late = next(s.state for s in steps[1:] if s.state is not None and s.free_robots and s.ready_tasks)
     assert late is not None
     late = late.copy()
-    late.time += 0.5  # a step the plan did not expect (another robot finished, the world ran late)
+    late.time += 0.5  # a step the plan did not expect (the world ran late)
+    late.refresh()
     decision = beam.decide(late)
     check_decision(late, decision, beam.name)
     assert beam.searches == 2
+
+
+def test_finishes_that_stall_do_not_sink_the_search(small_model):
+    """Online, a robot can be away with no task (unavailable until later): every finish
+    that needs it stalls. The search leaves such finishes out, and with none left LVWS
+    decides the step (a fallback), instead of the step raising."""
+    inst = Instance("away", ("a", "b"), (Robot("r0", (1, 0), 1.0), Robot("r1", (0, 1), 1.0)),
+                    (Task("t0", (1, 0), 1.0, 1.0), Task("t1", (0, 1), 1.0, 1.0)))
+    state = State.initial(inst)
+    state.robot_free_at[1] = 5.0  # away until t=5, nothing running
+    beam, lvws = LVWSBeamPolicy(model=small_model), LVWSPolicy(model=small_model, idle_bias=NO_VOLUNTARY_WAIT)
+    beam.reset(inst)
+    decision = beam.decide(state)
+    check_decision(state, decision, beam.name)
+    assert decision == lvws.decide(state) and beam.fallbacks == 1
 
 
 def test_a_beam_narrower_than_one_is_refused(small_model):
@@ -90,12 +107,13 @@ def test_the_shipped_beam_is_within_bound_of_the_proven_optimum_with_travel():
     for k in range(8):
         inst = dataset_instance(DATASETS["IV"], k, seed=13)
         opt = solve_exact(inst, workers=2, time_limit=30)
-        assert opt.status == "optimal" and opt.makespan
+        if opt.status != "optimal" or not opt.makespan:  # not proven in time on a loaded machine: no reference
+            continue
         sched = simulate(inst, beam).schedule
         assert check_schedule(inst, sched) == []
         assert sched.makespan >= opt.makespan - 1e-6  # never below a proven optimum
         gaps.append(100 * (sched.makespan - opt.makespan) / opt.makespan)
         hit += sched.makespan <= opt.makespan + 1e-6
-    print(f"beam at the optimum on {hit}/8, mean gap {np.mean(gaps):.2f} %")
-    assert np.mean(gaps) <= BEAM_BOUND_PERCENT and hit >= 2
+    print(f"beam at the optimum on {hit}/{len(gaps)}, mean gap {np.mean(gaps):.2f} %")
+    assert len(gaps) >= 6 and np.mean(gaps) <= BEAM_BOUND_PERCENT and hit >= 2
 
