@@ -228,9 +228,10 @@ class LVWSRolloutPolicy:
     told to wait; with ``exclude``, LVWS's matching redone without one free robot (who
     waits); with ``single_tasks``, each ready task started alone, by the subteam LVWS's
     rewards match to it, every other free robot waiting. Each candidate is scored by the
-    makespan reached when LVWS finishes the schedule from there (and GRP, with ``finish_with_grp``: the better of the two), and
-    the shortest wins, LVWS's own on ties. Never worse than LVWS alone on the executor's
-    model, at the price of one or two simulated schedules per distinct candidate and step.
+    makespan reached when LVWS finishes the schedule from there (and GRP, with
+    ``finish_with_grp``: the better of the two), and the shortest wins, LVWS's own on
+    ties. Never worse than LVWS alone on the executor's model, at the price of one or
+    two simulated schedules per distinct candidate and step.
 
     ``budget_ms`` (anytime): candidates are scored in the order above until the budget
     of the decision step is spent, and a continuation still running when it is spent is
