@@ -66,7 +66,10 @@ def _step(state: State, decision: Decision) -> PlannedStep:
     return PlannedStep(state.time, tuple(state.free_robots()), tuple(state.ready_tasks()), decision)
 
 
-def _key(s: State) -> tuple[bytes, bytes, tuple[tuple[int, ...], ...], float]:
+StateKey = tuple[bytes, bytes, tuple[tuple[int, ...], ...], float]
+
+
+def _key(s: State) -> StateKey:
     """States reached by different paths that are the same state."""
     return s.task_status.tobytes(), np.nan_to_num(s.task_start, nan=-1.0).tobytes(), tuple(map(tuple, s.task_team)), s.time
 
@@ -148,8 +151,7 @@ class LVWSBeamPolicy:
         beam: list[tuple[State, list[PlannedStep]]] = [(state.copy(), [])]
         try:
             while beam:
-                children: dict[tuple[bytes, bytes, tuple[tuple[int, ...], ...], float],
-                               tuple[float, State, list[PlannedStep]]] = {}
+                children: dict[StateKey, tuple[float, State, list[PlannedStep]]] = {}
                 for s, path in beam:
                     for d in self.rollout.candidates(s, deadline):
                         if deadline is not None and time.perf_counter() > deadline:

@@ -154,17 +154,18 @@ def check_params_file(path: str | Path, node: str = "scheduler", namespace: str 
 def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
     """(main policy, fallback) from the node's parameter values (LvwsError if one cannot be made)."""
     name, budget = values["policy"], float(values["decision_budget_ms"])
+    beam_budget = budget if budget > 0 else BEAM_BUDGET_MS  # a search without one could hold a cell for minutes
     options: dict[str, Any] = {}
     if name in LEARNED_POLICIES:
         options["model_path"] = values["model_path"]
     if name == "lvws_rollout" and budget > 0:
         options["budget_ms"] = budget
-    if name == "lvws_beam":  # a search without a budget could hold a large cell for minutes
-        options["budget_ms"] = budget if budget > 0 else BEAM_BUDGET_MS
+    if name == "lvws_beam":
+        options["budget_ms"] = beam_budget
     if name == "exact" and budget > 0:
         options["time_limit"] = budget / 1000
     fallback = values["fallback_policy"]
-    backup = {"budget_ms": budget if budget > 0 else BEAM_BUDGET_MS} if fallback == "lvws_beam" else {}
+    backup = {"budget_ms": beam_budget} if fallback == "lvws_beam" else {}
     return (make_policy(name, seed=int(values["seed"]), **options),
             make_policy(fallback, seed=int(values["seed"]), **backup) if fallback else None)
 
