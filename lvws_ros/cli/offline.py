@@ -57,6 +57,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
         options = {"time_limit": args.time_limit, "workers": args.workers}
     elif args.policy in LEARNED_POLICIES:
         options = {"model_path": args.model, "budget_ms": args.budget_ms}
+        if args.policy == "lvws_beam" and args.beam_width is not None:
+            options["width"] = args.beam_width
     policy = make_policy(args.policy, seed=args.seed, **options)
     result = simulate(inst, policy)
     expert = getattr(policy, "result", None)
@@ -202,6 +204,8 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--model", default=None, help="lvws/dbgm policy: checkpoint (default: the shipped one)")
     p.add_argument("--budget-ms", type=float, default=None,
                    help="lvws_rollout: time budget per decision step, lvws_beam: per search [ms] (default: none)")
+    p.add_argument("--beam-width", type=int, default=None,
+                   help="lvws_beam: partial schedules kept at each depth (default: its DEFAULT_WIDTH)")
     p.add_argument("--out", help="also write the schedule to this file")
 
     p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")

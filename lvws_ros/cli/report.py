@@ -174,14 +174,16 @@ def decision_inputs(run: Run, ack_timeout: float = 5.0) -> Iterator[tuple[Online
 
 
 def verify(bag: str | Path, *, policy: str | None = None, seed: int = 0, model_path: str | None = None,
-           ack_timeout: float = 5.0) -> tuple[int, list[Mismatch]]:
+           ack_timeout: float = 5.0, beam_width: int | None = None) -> tuple[int, list[Mismatch]]:
     """Feed each recorded decision's inputs (the TeamState and TaskGraph it names) to the
     scheduler core offline; return (decisions checked, those that differ)."""
     run = read_run(bag)
     if not run.decisions:
         raise BagError(f"{run.path}: no decisions recorded on /lvws/assignments")
     name = policy or run.decisions[0].policy
-    options = {"model_path": model_path} if name in LEARNED_POLICIES and model_path else {}
+    options: dict[str, object] = {"model_path": model_path} if name in LEARNED_POLICIES and model_path else {}
+    if name == "lvws_beam" and beam_width is not None:
+        options["width"] = beam_width
     online = OnlineScheduler(make_policy(name, seed=seed, **options), ack_timeout)
     bad: list[Mismatch] = []
     for k, (d, team, graph, state) in enumerate(decision_inputs(run, ack_timeout)):

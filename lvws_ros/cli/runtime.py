@@ -28,7 +28,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         return _compare_travel(cfg, args)
     sim = CellSim(cfg)
     events = load_events(args.events) if args.events else None
-    options = {"model_path": args.model} if args.model and args.policy in LEARNED_POLICIES else {}
+    options = _options(args, args.policy)
     try:
         sched, decisions = run_offline(sim, make_policy(args.policy, seed=args.seed, **options),
                                        frame_every=args.frame_every if args.gif or args.frames else None,
@@ -63,6 +63,14 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0 if not problems else 1
 
 
+def _options(args: argparse.Namespace, name: str) -> dict[str, Any]:
+    """make_policy's options for ``name`` from ``lvws sim``'s arguments."""
+    options: dict[str, Any] = {"model_path": args.model} if args.model and name in LEARNED_POLICIES else {}
+    if name == "lvws_beam" and args.beam_width is not None:
+        options["width"] = args.beam_width
+    return options
+
+
 def _compare_travel(cfg: Any, args: argparse.Namespace) -> int:
     """``lvws sim --compare``: each policy planned with travel, executed told the travel
     and not (lvws_ros.sim.runner.compare_travel), as a table."""
@@ -77,7 +85,7 @@ def _compare_travel(cfg: Any, args: argparse.Namespace) -> int:
                           if unknown else "--compare: name at least one policy")
 
     def maker(name: str) -> Any:
-        options = {"model_path": args.model} if args.model and name in LEARNED_POLICIES else {}
+        options = _options(args, name)
         return lambda: make_policy(name, seed=args.seed, **options)
 
     rows = compare_travel(cfg, [(n, maker(n)) for n in names])
@@ -142,7 +150,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_verify(args: argparse.Namespace) -> int:
     from lvws_ros.cli.report import verify
 
-    n, bad = verify(args.bag, policy=args.policy, seed=args.seed, model_path=args.model)
+    n, bad = verify(args.bag, policy=args.policy, seed=args.seed, model_path=args.model, beam_width=args.beam_width)
     for m in bad:
         print(f"step {m.step}: recorded {m.recorded}, offline {m.replayed}")
     print(f"{n - len(bad)}/{n} decisions reproduced" + (" (deterministic replay: ok)" if not bad else ""))
@@ -172,6 +180,8 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--policy", choices=POLICY_NAMES, default="lvws")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", default=None, help="lvws/dbgm checkpoint (default: the shipped one)")
+    p.add_argument("--beam-width", type=int, default=None,
+                   help="lvws_beam: partial schedules kept at each depth (default: its DEFAULT_WIDTH)")
     p.add_argument("--config", default=None, help="assembly-cell YAML (default: config/assembly_cell.yaml)")
     p.add_argument("--out", help="write the executed schedule (lvws-schedule/1) here")
     p.add_argument("--gif", help="write an animated GIF of the run here")
@@ -235,6 +245,7 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--policy", choices=POLICY_NAMES, default=None, help="default: the recorded one")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", default=None)
+    p.add_argument("--beam-width", type=int, default=None, help="lvws_beam: the run's beam_width (default: the search's)")
 
     p = add("reindex", cmd_reindex, "rebuild the index and metadata.yaml of a bag whose recorder was killed "
             "(like `ros2 bag reindex`)")

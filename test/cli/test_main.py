@@ -52,6 +52,10 @@ def test_beam_search_solves_and_says_when_its_budget_left_it_to_lvws(tmp_path):
     lvws_own = lvws("solve", EXAMPLE, "--policy", "lvws")
     assert json.loads(rushed.stdout)["makespan"] == json.loads(lvws_own.stdout)["makespan"]
     assert json.loads(out.read_text())["makespan"] <= json.loads(lvws_own.stdout)["makespan"]
+    narrow = lvws("solve", EXAMPLE, "--policy", "lvws_beam", "--beam-width", "1")
+    assert json.loads(narrow.stdout)["makespan"] <= json.loads(lvws_own.stdout)["makespan"]
+    bad = lvws("solve", EXAMPLE, "--policy", "lvws_beam", "--beam-width", "0", check=False)
+    assert bad.returncode == 2 and "beam width must be at least 1" in bad.stderr and "Traceback" not in bad.stderr
 
 
 def test_generate_and_evaluate(tmp_path):

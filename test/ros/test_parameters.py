@@ -130,12 +130,16 @@ def test_a_float_parameter_given_an_int_is_refused_with_a_clear_message(tmp_path
     assert out.returncode == 2 and "parameter ack_timeout" in out.stderr and "Traceback" not in out.stderr
 
 
-def test_the_scheduler_node_gives_the_beam_a_budget_unless_told_one():
-    from lvws_ros.learning.search import LVWSBeamPolicy
+def test_the_scheduler_node_gives_the_beam_a_budget_unless_told_one_and_its_width():
+    from lvws_ros.learning.search import DEFAULT_WIDTH, LVWSBeamPolicy
     from lvws_ros.ros.scheduler_node import BEAM_BUDGET_MS, build_policies
 
-    values = {"policy": "lvws_beam", "decision_budget_ms": 0.0, "model_path": "", "fallback_policy": "grp", "seed": 0}
+    values = {name: par.default for name, par in PARAMETERS.items()}
+    values.update({"policy": "lvws_beam", "fallback_policy": "grp"})
     main, fallback = build_policies(values)
     assert isinstance(main, LVWSBeamPolicy) and main.budget_ms == BEAM_BUDGET_MS and fallback is not None
-    main, _ = build_policies({**values, "decision_budget_ms": 250.0})
-    assert isinstance(main, LVWSBeamPolicy) and main.budget_ms == 250.0
+    assert main.width == DEFAULT_WIDTH
+    main, _ = build_policies({**values, "decision_budget_ms": 250.0, "beam_width": 3})
+    assert isinstance(main, LVWSBeamPolicy) and main.budget_ms == 250.0 and main.width == 3
+    _, backup = build_policies({**values, "policy": "grp", "fallback_policy": "lvws_beam", "beam_width": 5})
+    assert isinstance(backup, LVWSBeamPolicy) and backup.width == 5 and backup.budget_ms == BEAM_BUDGET_MS
