@@ -162,6 +162,21 @@ class Decision:
     waiting: tuple[int, ...] = ()
 
 
+PLAN_DRIFT = 0.01  # share of a plan's makespan by which the world may run early or late at a step
+
+
+def plan_step_near(times: Sequence[float], now: float, makespan: float) -> float | None:
+    """The time in ``times`` (a plan's step times) that is the world's step at ``now``:
+    the nearest, if within TOLERANCE or PLAN_DRIFT x the plan's makespan (online, a
+    simulator or real robots run a little early or late: the world integrates travel, the
+    plan computes it); None when none is. A policy that follows a plan re-plans when this
+    is None, not at every step at which the world is a little off."""
+    if not times:
+        return None
+    nearest = min(times, key=lambda x: abs(x - now))
+    return nearest if abs(nearest - now) <= max(TOLERANCE, PLAN_DRIFT * makespan) else None
+
+
 class Policy(Protocol):
     name: str
 

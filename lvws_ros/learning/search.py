@@ -20,9 +20,10 @@ first), as the decisions of every step to its end, and the policy follows them. 
 a budget it is therefore never worse than LVWS or GRP alone on the executor's model
 (with one, never worse than LVWS once its own finish fits in the budget). A finish that
 cannot complete the schedule (it stalls) is left out of the search. When the world
-departs from the plan (a step at another time, other free robots or ready tasks: online
-use with failures, late tasks or a real simulator), the policy searches again from the
-state it is in.
+departs from the plan (a step further from the plan's times than
+:data:`~lvws_ros.core.executor.PLAN_DRIFT` allows, other free robots or ready tasks:
+online use with failures or late tasks), the policy searches again from the state it is
+in; a world only a little early or late (a simulator integrating travel) is followed.
 
 ``budget_ms`` (anytime): a search stops when its budget is spent, a finish still running
 then is abandoned, and the best schedule found so far is followed; when none was found
@@ -42,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, Policy, State, advance, check_decision, simulate
+from lvws_ros.core.executor import Decision, Policy, State, advance, check_decision, plan_step_near, simulate
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import PolicyError
@@ -99,17 +100,21 @@ class LVWSBeamPolicy:
 
     def _follows(self, state: State) -> bool:
         """Whether the plan's next step is this state's: steps that start nothing and lie
-        behind the world's time are skipped (online, decisions come only when a robot is
-        freed or a task gets ready), and the step must still obey Eqs. 8-11 here."""
+        behind the world's step are skipped (online, decisions come only when a robot is
+        freed or a task gets ready); the step must be the world's step by time
+        (:func:`~lvws_ros.core.executor.plan_step_near`: online, the world runs a little
+        early or late), expect the same free robots and ready tasks, and still obey Eqs.
+        8-11 here."""
         if self._planned_for is not state.instance:
             return False
-        while self._plan and not self._plan[0].decision.assignments and self._plan[0].time < state.time - TOLERANCE:
+        times = [p.time for p in self._plan]
+        now = plan_step_near(times, state.time, self.planned_makespan)
+        while self._plan and not self._plan[0].decision.assignments and (now is None or self._plan[0].time < now):
             self._plan.popleft()
         if not self._plan:
             return False
         p = self._plan[0]
-        if (abs(p.time - state.time) > TOLERANCE or p.free != tuple(state.free_robots())
-                or p.ready != tuple(state.ready_tasks())):
+        if now is None or p.time != now or p.free != tuple(state.free_robots()) or p.ready != tuple(state.ready_tasks()):
             return False
         try:
             check_decision(state, p.decision, self.name)

@@ -41,7 +41,15 @@ import numpy as np
 import numpy.typing as npt
 from ortools.sat.python import cp_model
 
-from lvws_ros.core.executor import Decision, SimulationResult, State, TaskStatus, schedule_from_state, simulate
+from lvws_ros.core.executor import (
+    Decision,
+    SimulationResult,
+    State,
+    TaskStatus,
+    plan_step_near,
+    schedule_from_state,
+    simulate,
+)
 from lvws_ros.core.matching import Match, check_shapes, match_reward
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
@@ -499,7 +507,10 @@ def _demand(model: cp_model.CpModel, values: list[int], choice: Sequence[cp_mode
 
 class ExactPolicy:
     """Follows the expert's schedule: at each decision step, starts the tasks the
-    expert planned to start now, with the planned subteams (the ``exact`` policy)."""
+    expert planned to start now, with the planned subteams (the ``exact`` policy). The
+    world's step is the plan's step nearest to it within PLAN_DRIFT
+    (:func:`~lvws_ros.core.executor.plan_step_near`); when none is, or a task's planned
+    departure has passed, it solves again from the state it is in (online use)."""
 
     name = "exact"
 
@@ -510,37 +521,45 @@ class ExactPolicy:
         self.result: ExpertResult | None = None
         self._plan: dict[int, Assignment] = {}
         self._leave: dict[str, float] = {}  # when each planned subteam sets out
+        self.solves = 0  # plans made since reset (1 when the world followed the plan)
 
     def reset(self, instance: Instance) -> None:
         self.result = None
         self._plan = {}
         self._leave = {}
+        self.solves = 0
 
-    def _expected(self, t: float) -> bool:
-        """Whether ``t`` is a departure or end time of the plan (always so in the executor)."""
-        return any(abs(self._leave.get(a.task, a.start) - t) <= TOLERANCE or abs(a.end - t) <= TOLERANCE
-                   for a in self._plan.values())
+    def _plan_time(self, t: float) -> float | None:
+        """The plan's departure or end time that the world's step at ``t`` is
+        (:func:`~lvws_ros.core.executor.plan_step_near`; always ``t`` in the executor)."""
+        assert self.result is not None
+        times = [t for a in self._plan.values() for t in (self._leave.get(a.task, a.start), a.end)]
+        return plan_step_near(times, t, self.result.makespan or 0.0)
 
-    def _missed(self, state: State) -> bool:
-        """A ready task whose planned departure has passed (the world ran late): waiting
-        for it would stall."""
-        return any(self._leave.get(a.task, a.start) < state.time - TOLERANCE
+    def _missed(self, state: State, now: float) -> bool:
+        """A ready task whose planned departure is before the plan's step ``now`` (the
+        world ran late): waiting for it would stall."""
+        return any(self._leave.get(a.task, a.start) < now - TOLERANCE
                    for j in state.ready_tasks() if (a := self._plan.get(j)) is not None)
 
     def decide(self, state: State) -> Decision:
         inst = state.instance
-        if self.result is not None and (not self._expected(state.time) or self._missed(state)):
+        now = self._plan_time(state.time) if self.result is not None else None
+        if now is None or self._missed(state, now):
             self.result = None  # the world deviated from the plan (online use): re-solve from here
         if self.result is None:
             self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed)
             assert self.result.schedule is not None
             self._plan = {inst.task_index[a.task]: a for a in self.result.schedule.assignments}
             self._leave = departures(inst, self.result.schedule, state)  # = starts without travel
+            now = state.time
+            self.solves += 1
+        assert now is not None  # the plan's step: the world's, or the state's when just planned
         free = set(state.free_robots())
         out = []
         for j in state.ready_tasks():
             a = self._plan.get(j)
-            if a is None or abs(self._leave.get(a.task, a.start) - state.time) > TOLERANCE:
+            if a is None or abs(self._leave.get(a.task, a.start) - now) > TOLERANCE:
                 continue
             team = tuple(inst.robot_index[r] for r in a.robots)
             if set(team) <= free:

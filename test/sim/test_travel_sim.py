@@ -68,6 +68,26 @@ def test_the_exact_plan_is_executed_on_time_and_no_policy_beats_it():
         assert check_schedule(sim.executed_instance(), sched) == []  # rule 7 included
 
 
+def test_the_world_follows_the_plan_a_little_late_without_re_planning(monkeypatch):
+    """In the simulator the world's steps come a few physics steps off the plan's (travel
+    is integrated); exact and the beam search follow their plan (PLAN_DRIFT) instead of
+    planning again at every such step, and execute as planned. Without the drift, both
+    plan again."""
+    import lvws_ros.core.executor as executor
+
+    drifts = (executor.PLAN_DRIFT, 0.0)
+    for name, count in (("exact", "solves"), ("lvws_beam", "searches")):
+        plan = simulate(CellSim(CFG).inst, make_policy(name)).schedule.makespan
+        made = []
+        for drift in drifts:
+            monkeypatch.setattr(executor, "PLAN_DRIFT", drift)
+            policy = make_policy(name, **({"budget_ms": 1000.0} if name == "lvws_beam" else {}))
+            sched, decisions = run_offline(CellSim(CFG), policy)
+            assert len(decisions) > 1 and abs(sched.makespan - plan) <= 0.03 * plan
+            made.append(getattr(policy, count))
+        assert made[0] == 1 and made[1] > 1, (name, made)
+
+
 def test_a_schedule_from_a_travel_blind_plan_is_rejected_by_rule_7():
     sim = CellSim(CFG)
     blind = simulate(replace(sim.inst, travel=None), make_policy("grp")).schedule
