@@ -533,7 +533,7 @@ class ExactPolicy:
         """The plan's departure or end time that the world's step at ``t`` is
         (:func:`~lvws_ros.core.executor.plan_step_near`; always ``t`` in the executor)."""
         assert self.result is not None
-        times = [t for a in self._plan.values() for t in (self._leave.get(a.task, a.start), a.end)]
+        times = [x for a in self._plan.values() for x in (self._leave.get(a.task, a.start), a.end)]
         return plan_step_near(times, t, self.result.makespan or 0.0)
 
     def _missed(self, state: State, now: float) -> bool:
