@@ -21,7 +21,8 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     """A policy by its name. ``options``: ``time_limit``/``workers`` for ``exact``,
     ``model_path`` for the learned ones (empty or None: the shipped checkpoint),
     ``budget_ms`` for ``lvws_rollout`` (per decision step) and ``lvws_beam`` (per search;
-    None: no budget), ``width`` for ``lvws_beam``."""
+    None: no budget), ``width`` for ``lvws_beam`` (None: its default); the learned ones
+    ignore the options of the others."""
     if name == "grp":
         from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
@@ -46,6 +47,6 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
             from lvws_ros.learning.search import DEFAULT_WIDTH, LVWSBeamPolicy
 
             return LVWSBeamPolicy(model_path=model_path, budget_ms=options.get("budget_ms"),
-                                  width=options.get("width", DEFAULT_WIDTH))
+                                  width=DEFAULT_WIDTH if options.get("width") is None else options["width"])
         return kinds[name](model_path=model_path)
     raise PolicyError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")

@@ -56,9 +56,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if args.policy == "exact":
         options = {"time_limit": args.time_limit, "workers": args.workers}
     elif args.policy in LEARNED_POLICIES:
-        options = {"model_path": args.model, "budget_ms": args.budget_ms}
-        if args.policy == "lvws_beam" and args.beam_width is not None:
-            options["width"] = args.beam_width
+        options = {"model_path": args.model, "budget_ms": args.budget_ms, "width": args.beam_width}
     policy = make_policy(args.policy, seed=args.seed, **options)
     result = simulate(inst, policy)
     expert = getattr(policy, "result", None)

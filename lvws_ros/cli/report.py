@@ -181,9 +181,7 @@ def verify(bag: str | Path, *, policy: str | None = None, seed: int = 0, model_p
     if not run.decisions:
         raise BagError(f"{run.path}: no decisions recorded on /lvws/assignments")
     name = policy or run.decisions[0].policy
-    options: dict[str, object] = {"model_path": model_path} if name in LEARNED_POLICIES and model_path else {}
-    if name == "lvws_beam" and beam_width is not None:
-        options["width"] = beam_width
+    options = {"model_path": model_path, "width": beam_width} if name in LEARNED_POLICIES else {}
     online = OnlineScheduler(make_policy(name, seed=seed, **options), ack_timeout)
     bad: list[Mismatch] = []
     for k, (d, team, graph, state) in enumerate(decision_inputs(run, ack_timeout)):

@@ -65,10 +65,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 def _options(args: argparse.Namespace, name: str) -> dict[str, Any]:
     """make_policy's options for ``name`` from ``lvws sim``'s arguments."""
-    options: dict[str, Any] = {"model_path": args.model} if args.model and name in LEARNED_POLICIES else {}
-    if name == "lvws_beam" and args.beam_width is not None:
-        options["width"] = args.beam_width
-    return options
+    return {"model_path": args.model, "width": args.beam_width} if name in LEARNED_POLICIES else {}
 
 
 def _compare_travel(cfg: Any, args: argparse.Namespace) -> int:

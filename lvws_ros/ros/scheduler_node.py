@@ -163,7 +163,7 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
         options["model_path"] = values["model_path"]
     if name == "lvws_rollout" and budget > 0:
         options["budget_ms"] = budget
-    beam = {"budget_ms": beam_budget, **({"width": int(values["beam_width"])} if values["beam_width"] > 0 else {})}
+    beam = {"budget_ms": beam_budget, "width": int(values["beam_width"]) or None}  # 0: the search's default
     if name == "lvws_beam":
         options.update(beam)
     if name == "exact" and budget > 0:
