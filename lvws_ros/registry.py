@@ -13,16 +13,17 @@ from lvws_ros.errors import PolicyError
 
 __all__ = ["LEARNED_POLICIES", "POLICY_NAMES", "make_policy"]
 
-POLICY_NAMES = ("lvws", "lvws_rollout", "lvws_beam", "dbgm", "grp", "rand", "rand_subteam", "exact")
-LEARNED_POLICIES = ("lvws", "lvws_rollout", "lvws_beam", "dbgm")  # take a model_path
+POLICY_NAMES = ("lvws", "lvws_sample", "lvws_rollout", "lvws_beam", "dbgm", "grp", "rand", "rand_subteam", "exact")
+LEARNED_POLICIES = ("lvws", "lvws_sample", "lvws_rollout", "lvws_beam", "dbgm")  # take a model_path
 
 
 def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     """A policy by its name. ``options``: ``time_limit``/``workers`` for ``exact``,
     ``model_path`` for the learned ones (empty or None: the shipped checkpoint),
-    ``budget_ms`` for ``lvws_rollout`` (per decision step) and ``lvws_beam`` (per search;
-    None: no budget), ``width`` for ``lvws_beam`` (None: its default); the learned ones
-    ignore the options of the others."""
+    ``budget_ms`` for ``lvws_rollout`` and ``lvws_sample`` (per decision step) and
+    ``lvws_beam`` (per search; None: no budget), ``width`` for ``lvws_beam`` (None: its
+    default), ``samples`` and ``temperature`` for ``lvws_sample`` (None: its defaults; its
+    noise is seeded by ``seed``); the learned ones ignore the options of the others."""
     if name == "grp":
         from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
@@ -43,6 +44,13 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
             "lvws": LVWSPolicy, "dbgm": DBGMPolicy, "lvws_rollout": LVWSRolloutPolicy}
         if name == "lvws_rollout":
             return LVWSRolloutPolicy(model_path=model_path, budget_ms=options.get("budget_ms"))
+        if name == "lvws_sample":
+            from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, LVWSSamplePolicy
+
+            samples, temperature = options.get("samples"), options.get("temperature")
+            return LVWSSamplePolicy(model_path=model_path, budget_ms=options.get("budget_ms"), seed=seed,
+                                    samples=DEFAULT_SAMPLES if samples is None else samples,
+                                    temperature=DEFAULT_TEMPERATURE if temperature is None else temperature)
         if name == "lvws_beam":
             from lvws_ros.learning.search import DEFAULT_WIDTH, LVWSBeamPolicy
 

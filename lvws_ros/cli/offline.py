@@ -56,7 +56,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if args.policy == "exact":
         options = {"time_limit": args.time_limit, "workers": args.workers}
     elif args.policy in LEARNED_POLICIES:
-        options = {"model_path": args.model, "budget_ms": args.budget_ms, "width": args.beam_width}
+        options = {"model_path": args.model, "budget_ms": args.budget_ms, "width": args.beam_width,
+                   "samples": args.samples, "temperature": args.temperature}
     policy = make_policy(args.policy, seed=args.seed, **options)
     result = simulate(inst, policy)
     expert = getattr(policy, "result", None)
@@ -67,6 +68,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if fallbacks := getattr(policy, "fallbacks", 0):
         print(f"{policy.name}: {fallbacks} of {len(result.steps)} steps decided by LVWS alone (the search budget "
               "was spent before any schedule was found)", file=sys.stderr)
+    if args.policy == "lvws_sample":
+        print(f"lvws_sample: seed {args.seed}", file=sys.stderr)
     if args.out:
         save_schedule(result.schedule, args.out)
     sys.stdout.write(dumps(schedule_to_dict(result.schedule)))
@@ -159,7 +162,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                            wait_head=args.wait_head and not args.dbgm)
     train_cfg = TrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, lam=args.lam,
                             choice_weight=args.choice_weight, seed=args.seed, dbgm=args.dbgm,
-                            wait_weight=args.wait_weight, model=model_cfg)
+                            wait_weight=args.wait_weight, model=model_cfg, device=args.device)
     datasets = tuple(d for d in args.datasets.split(",") if d)
     trainable = [k for k, spec in DATASETS.items() if spec.train]
     unknown = [d for d in datasets if d not in trainable]
@@ -177,8 +180,33 @@ def cmd_train(args: argparse.Namespace) -> int:
                          dagger_instances=args.dagger_instances, dagger_epochs=args.dagger_epochs,
                          label_time_limit=args.label_time_limit, processes=args.processes,
                          ray_address=args.ray_address, train=train_cfg)
+    if args.improve:
+        return _improve(args, cfg, own, init or DEFAULT_MODELS["lvws"])
     run_pipeline(cfg, args.out, cache_dir=args.cache_dir, resume=args.resume, init=init, own=own,
                  progress=not args.quiet)
+    return 0
+
+
+def _improve(args: argparse.Namespace, cfg: Any, own: list[Instance], init: Path) -> int:
+    """``lvws train --improve ROUNDS``: self-improvement from ``init`` on the training
+    split (lvws_ros.learning.improvement), validated on its held-out instances."""
+    from lvws_ros.learning.improvement import ImproveConfig, improve, large_instances
+    from lvws_ros.learning.sampling import DEFAULT_TEMPERATURE
+    from lvws_ros.learning.training import split_training_instances
+
+    if args.dbgm:
+        raise ConfigError("--improve trains LVWS; DBGM has no sampling")
+    train_set, val_set = split_training_instances(cfg, own)
+    train_set += large_instances(args.large, args.data_seed)
+    icfg = ImproveConfig(rounds=args.improve, samples=args.samples, beam_width=args.improve_beam,
+                         temperature=DEFAULT_TEMPERATURE if args.temperature is None else args.temperature,
+                         expert_time_limit=args.improve_expert, large=args.large, epochs=args.epochs, lr=args.lr,
+                         seed=args.seed, processes=args.processes, ray_address=args.ray_address,
+                         train=cfg.train)
+    print(f"self-improvement: seed {args.seed}, data seed {args.data_seed}, {len(train_set)} training and "
+          f"{len(val_set)} validation instances", file=sys.stderr)
+    improve(init, train_set, val_set, icfg, args.out, cache_dir=args.cache_dir, resume=args.resume,
+            progress=not args.quiet)
     return 0
 
 
@@ -201,9 +229,14 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--workers", type=int, default=8, help="exact policy: CP-SAT workers")
     p.add_argument("--model", default=None, help="lvws/dbgm policy: checkpoint (default: the shipped one)")
     p.add_argument("--budget-ms", type=float, default=None,
-                   help="lvws_rollout: time budget per decision step, lvws_beam: per search [ms] (default: none)")
+                   help="lvws_rollout, lvws_sample: time budget per decision step, lvws_beam: per search [ms] "
+                        "(default: none)")
     p.add_argument("--beam-width", type=int, default=None,
                    help="lvws_beam: partial schedules kept at each depth (default: its DEFAULT_WIDTH)")
+    p.add_argument("--samples", type=int, default=None,
+                   help="lvws_sample: schedules sampled in lockstep per round (default: its DEFAULT_SAMPLES)")
+    p.add_argument("--temperature", type=float, default=None,
+                   help="lvws_sample: scale of the Gumbel noise on R (default: its DEFAULT_TEMPERATURE; 0: LVWS)")
     p.add_argument("--out", help="also write the schedule to this file")
 
     p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")
@@ -271,6 +304,20 @@ def _add_train(add: Adder) -> None:
     p.add_argument("--dagger-epochs", type=int, default=6)
     p.add_argument("--processes", type=int, default=2, help="parallel labelling processes")
     p.add_argument("--ray-address", default=None, help="label on this Ray cluster ('local': a local Ray instance)")
-    p.add_argument("--cache-dir", default=None, help="keep expert demonstrations here between runs")
-    p.add_argument("--resume", default=None, help="continue from a training checkpoint (*.train.pt)")
+    p.add_argument("--cache-dir", default=None, help="keep expert demonstrations (and validation optima) here")
+    p.add_argument("--resume", default=None,
+                   help="continue from a training checkpoint (*.train.pt; with --improve: *.improve.pt)")
+    p.add_argument("--device", default="cpu", help="where training runs: cpu (default), cuda, cuda:N, or auto")
+    g = p.add_argument_group("self-improvement (--improve): labels from the policy's own best schedules")
+    g.add_argument("--improve", type=int, default=0, metavar="ROUNDS",
+                   help="rounds of self-improvement from --init (default: the shipped model) instead of imitation; "
+                        "--epochs and --lr then apply to each round's fine-tuning")
+    g.add_argument("--samples", type=int, default=16, help="schedules sampled per training instance and round")
+    g.add_argument("--temperature", type=float, default=None, help="Gumbel noise on R (default: lvws_sample's)")
+    g.add_argument("--improve-beam", type=int, default=0, metavar="WIDTH",
+                   help="also the beam search's schedule at this width (0: not)")
+    g.add_argument("--improve-expert", type=float, default=0.0, metavar="SECONDS",
+                   help="also the expert's schedule, CP-SAT within this limit (0: not)")
+    g.add_argument("--large", type=int, default=0,
+                   help="training instances of the mixture at 20-60 robots x 50-200 tasks (no proof needed)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -55,7 +55,7 @@ def save_checkpoint(path: str | Path, model: GATN, meta: dict[str, Any],
     data: dict[str, Any] = {
         "format": CHECKPOINT_FORMAT,
         "config": model.cfg.to_dict(),
-        "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
+        "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
         "meta": meta,
         "epoch": epoch,
     }

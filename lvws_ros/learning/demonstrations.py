@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from lvws_ros.core.executor import Policy, State, simulate
+from lvws_ros.core.executor import Decision, Policy, State, simulate
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Schedule
 from lvws_ros.core.subteams import TOLERANCE
@@ -53,8 +53,12 @@ from lvws_ros.policies.exact import ExactPolicy, departures, solve_exact
 GAMMA = 0.9
 
 
-def label_state(state: State, schedule: Schedule, gamma: float = GAMMA) -> tuple[np.ndarray, np.ndarray]:
-    """E and X of one state, from an expert schedule that continues from it."""
+def label_state(state: State, schedule: Schedule, gamma: float = GAMMA,
+                started: Decision | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """E and X of one state, from a schedule that continues from it. The tasks the
+    schedule assigns at this state are those whose subteam sets out now (the expert's
+    left-shifted schedule), or, with ``started``, the decision taken in this state (a
+    policy's own schedule, whose departures are its decisions)."""
     inst = state.instance
     n, m = inst.num_robots, inst.num_tasks
     t = state.time
@@ -68,11 +72,12 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA) -> tuple
     assigned: set[int] = set()
     next_end = np.full(n, np.inf)
     # the expert assigns a task at its departure: its start, or (travel) when its subteam sets out
-    leave = departures(inst, schedule, state) if inst.travel is not None else {}
+    leave = departures(inst, schedule, state) if inst.travel is not None and started is None else {}
+    now = None if started is None else {task for task, _ in started.assignments}
     for a in schedule.assignments:
         j = inst.task_index[a.task]
         robots = [inst.robot_index[r] for r in a.robots]
-        assign_at = leave.get(a.task, a.start)
+        assign_at = t if now is not None and j in now else leave.get(a.task, a.start)
         if abs(assign_at - t) <= TOLERANCE and np.isnan(state.task_start[j]):
             for r in robots:
                 e[r, j] = gamma ** steps_until(a.end)
@@ -94,10 +99,11 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA) -> tuple
     return e, x
 
 
-def demo(state: State, schedule: Schedule, cache: InstanceFeatures) -> Demo:
-    """The demonstration of ``state``: its features and E, X on the entries it reads."""
+def demo(state: State, schedule: Schedule, cache: InstanceFeatures, started: Decision | None = None) -> Demo:
+    """The demonstration of ``state``: its features and E, X on the entries it reads
+    (``started``: as :func:`label_state`)."""
     feats = cache.encode(state)
-    e, x = label_state(state, schedule)
+    e, x = label_state(state, schedule, started=started)
     cols = [*feats.task_ids[feats.cols[:-1]], state.instance.num_tasks]
     pick = np.ix_(feats.rows, cols)
     return Demo(feats, e[pick], x[pick])
@@ -132,6 +138,38 @@ def _expert_job(args: tuple[Instance, float, int]) -> list[Demo]:
     return expert_demos(*args)
 
 
+def run_jobs(jobs: Sequence[Any], job: Callable[[Any], Any], *, processes: int = 2, ray_address: str | None = None,
+             progress: bool = True, desc: str = "labelling") -> list[Any]:
+    """``job`` on every item of ``jobs``, in order: in local processes, or as Ray tasks
+    when ``ray_address`` is given ("local" starts a local Ray instance)."""
+    from tqdm import tqdm
+
+    if ray_address is not None:
+        import ray
+
+        ray.init(address=None if ray_address == "local" else ray_address,
+                 num_cpus=processes if ray_address == "local" else None,
+                 include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
+        try:
+            remote = ray.remote(job)
+            pending = [remote.remote(j) for j in jobs]
+            with tqdm(total=len(pending), desc=f"{desc} (ray)", disable=not progress, unit="inst") as bar:
+                order = {ref: k for k, ref in enumerate(pending)}
+                done: dict[int, Any] = {}
+                while pending:
+                    ready, pending = ray.wait(pending, num_returns=1)
+                    done[order[ready[0]]] = ray.get(ready[0])
+                    bar.update(1)
+            return [done[k] for k in range(len(jobs))]
+        finally:
+            ray.shutdown()
+    if processes <= 1:
+        return [job(j) for j in tqdm(jobs, desc=desc, disable=not progress, unit="inst")]
+    with ProcessPoolExecutor(max_workers=processes) as pool:
+        return list(tqdm(pool.map(job, jobs, chunksize=4), total=len(jobs), desc=desc, disable=not progress,
+                         unit="inst"))
+
+
 def label_instances(
     instances: Sequence[Instance],
     *,
@@ -143,40 +181,12 @@ def label_instances(
     job: Callable[[Any], list[Demo]] = _expert_job,
     progress: bool = True,
 ) -> list[Demo]:
-    """Label many instances in parallel: local processes, or Ray tasks when
-    ``ray_address`` is given ("local" starts a local Ray instance). By default each job
-    is the expert's own run on one instance; ``jobs``/``job`` run other labelling
-    (DAgger) the same way."""
-    from tqdm import tqdm
-
+    """Label many instances in parallel (:func:`run_jobs`). By default each job is the
+    expert's own run on one instance; ``jobs``/``job`` run other labelling (DAgger) the
+    same way."""
     if jobs is None:
         jobs = [(inst, time_limit, workers) for inst in instances]
-    results: list[list[Demo]] = []
-    if ray_address is not None:
-        import ray
-
-        ray.init(address=None if ray_address == "local" else ray_address,
-                 num_cpus=processes if ray_address == "local" else None,
-                 include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
-        try:
-            remote = ray.remote(job)
-            pending = [remote.remote(j) for j in jobs]
-            with tqdm(total=len(pending), desc="labelling (ray)", disable=not progress, unit="inst") as bar:
-                order = {ref: k for k, ref in enumerate(pending)}
-                done: dict[int, list[Demo]] = {}
-                while pending:
-                    ready, pending = ray.wait(pending, num_returns=1)
-                    done[order[ready[0]]] = ray.get(ready[0])
-                    bar.update(1)
-            results = [done[k] for k in range(len(jobs))]
-        finally:
-            ray.shutdown()
-    elif processes <= 1:
-        results = [job(j) for j in tqdm(jobs, desc="labelling", disable=not progress, unit="inst")]
-    else:
-        with ProcessPoolExecutor(max_workers=processes) as pool:
-            results = list(tqdm(pool.map(job, jobs, chunksize=4), total=len(jobs), desc="labelling",
-                                disable=not progress, unit="inst"))
+    results = run_jobs(jobs, job, processes=processes, ray_address=ray_address, progress=progress)
     return [d for demos in results for d in demos]
 
 

@@ -318,6 +318,11 @@ class Batch:
     entry_idle: Tensor  # (entries,) bool: the idle column
     rows: int  # number of flat rows
 
+    def to(self, device: torch.device | str) -> Batch:
+        """The batch on ``device`` (itself when already there)."""
+        moved: dict[str, Any] = {k: v.to(device) if isinstance(v, Tensor) else v for k, v in self.__dict__.items()}
+        return Batch(**moved)
+
 
 def collate(graphs: Sequence[GraphFeatures]) -> Batch:
     """Flatten graphs of any sizes into one batch; the entries of graph b are its
@@ -374,6 +379,31 @@ def decision_outputs(model: GATN, features: GraphFeatures) -> tuple[np.ndarray, 
                     None if wait is None else torch.sigmoid(wait).numpy().astype(np.float64))
     finally:
         torch.set_num_threads(threads)
+
+
+def batch_decision_outputs(model: GATN, features: Sequence[GraphFeatures]
+                           ) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """:func:`decision_outputs` of many decision steps (of any instances and sizes) in one
+    batched forward pass: each graph's (rows, cols) R and its rows' wait probabilities.
+    One graph goes through :func:`decision_outputs` itself (the same numbers as LVWS)."""
+    if len(features) <= 1:
+        return [decision_outputs(model, f) for f in features]
+    threads = torch.get_num_threads()
+    torch.set_num_threads(INFERENCE_THREADS)
+    try:
+        with torch.inference_mode():
+            r, wait = model.forward_with_wait(collate(features))
+            rewards = r.numpy().astype(np.float64)
+            waits = None if wait is None else torch.sigmoid(wait).numpy().astype(np.float64)
+    finally:
+        torch.set_num_threads(threads)
+    out: list[tuple[np.ndarray, np.ndarray | None]] = []
+    entry = row = 0
+    for f in features:
+        nr, nc = len(f.rows), len(f.cols)
+        out.append((rewards[entry:entry + nr * nc].reshape(nr, nc), None if waits is None else waits[row:row + nr]))
+        entry, row = entry + nr * nc, row + nr
+    return out
 
 
 def reward_matrix(model: GATN, features: GraphFeatures) -> np.ndarray:

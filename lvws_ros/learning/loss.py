@@ -42,6 +42,10 @@ class Targets:
     wait: Tensor  # (rows,) 0/1: the expert waits voluntarily with this robot (see wait_targets)
     wait_valid: Tensor  # (rows,) bool: rows in the wait head's term (see wait_targets)
 
+    def to(self, device: torch.device | str) -> Targets:
+        """The targets on ``device``."""
+        return Targets(**{k: v.to(device) for k, v in self.__dict__.items()})
+
 
 def feasibility_mask(robot_caps: BoolArray, task_caps: BoolArray, robot_payload: FloatArray,
                      task_payload: FloatArray) -> npt.NDArray[np.bool_]:

@@ -69,6 +69,12 @@ class LVWSPolicy:
         if self._cache is None or self._cache.instance is not instance:  # rollouts reset once per simulation
             self._cache = InstanceFeatures(instance, self.model.cfg.pair_features)
 
+    def features(self, instance: Instance) -> InstanceFeatures:
+        """What the model reads of ``instance`` alone (computed once per instance)."""
+        self.reset(instance)
+        assert self._cache is not None
+        return self._cache
+
     def outputs(self, state: State) -> tuple[np.ndarray, np.ndarray | None]:
         """R of Eq. 6 for this decision step, (free robots, ready tasks + idle task), and
         the free robots' wait probabilities (None without a wait head): one forward pass,

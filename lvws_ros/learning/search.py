@@ -75,6 +75,51 @@ def _key(s: State) -> StateKey:
     return s.task_status.tobytes(), np.nan_to_num(s.task_start, nan=-1.0).tobytes(), tuple(map(tuple, s.task_team)), s.time
 
 
+class FollowedPlan:
+    """The remaining decision steps of a plan a policy follows (``lvws_beam``,
+    ``lvws_sample``), and the one rule for whether the world still follows it."""
+
+    def __init__(self) -> None:
+        self.steps: deque[PlannedStep] = deque()
+        self.instance: Instance | None = None
+        self.makespan = math.nan  # of the plan (nan: none)
+
+    def clear(self) -> None:
+        self.steps.clear()
+        self.instance, self.makespan = None, math.nan
+
+    def replace(self, instance: Instance, steps: list[PlannedStep], makespan: float) -> None:
+        self.steps = deque(steps)
+        self.instance, self.makespan = instance, makespan
+
+    def follows(self, state: State, policy: str) -> bool:
+        """Whether the plan's next step is this state's: steps that start nothing and lie
+        behind the world's step are skipped (online, decisions come only when a robot is
+        freed or a task gets ready); the step must be the world's step by time
+        (:func:`~lvws_ros.core.executor.plan_step_near`: online, the world runs a little
+        early or late), expect the same free robots and ready tasks, and still obey Eqs.
+        8-11 here."""
+        if self.instance is not state.instance:
+            return False
+        times = [p.time for p in self.steps]
+        now = plan_step_near(times, state.time, self.makespan)
+        while self.steps and not self.steps[0].decision.assignments and (now is None or self.steps[0].time < now):
+            self.steps.popleft()
+        if not self.steps:
+            return False
+        p = self.steps[0]
+        if now is None or p.time != now or p.free != tuple(state.free_robots()) or p.ready != tuple(state.ready_tasks()):
+            return False
+        try:
+            check_decision(state, p.decision, policy)
+        except PolicyError:  # e.g. a robot the plan sends is at another site than planned
+            return False
+        return True
+
+    def pop(self) -> Decision:
+        return self.steps.popleft().decision
+
+
 class LVWSBeamPolicy:
     """Beam search over LVWS's candidate decisions (module docstring)."""
 
@@ -86,53 +131,27 @@ class LVWSBeamPolicy:
             raise PolicyError(f"lvws_beam: the beam width must be at least 1, got {width}")
         self.rollout = LVWSRolloutPolicy(model=model, model_path=model_path, single_tasks=True)
         self.width, self.budget_ms = width, budget_ms
-        self._plan: deque[PlannedStep] = deque()
-        self._planned_for: Instance | None = None
+        self.plan = FollowedPlan()
         self.planned_makespan = math.nan  # of the schedule the latest search found (nan: none)
         self.searches = 0  # searches run since reset (1 when the world followed the plan)
         self.fallbacks = 0  # steps decided by LVWS alone: the budget was spent before any schedule was found
 
     def reset(self, instance: Instance) -> None:
         self.rollout.reset(instance)
-        self._plan.clear()
-        self._planned_for, self.planned_makespan = None, math.nan
+        self.plan.clear()
+        self.planned_makespan = math.nan
         self.searches = self.fallbacks = 0
 
-    def _follows(self, state: State) -> bool:
-        """Whether the plan's next step is this state's: steps that start nothing and lie
-        behind the world's step are skipped (online, decisions come only when a robot is
-        freed or a task gets ready); the step must be the world's step by time
-        (:func:`~lvws_ros.core.executor.plan_step_near`: online, the world runs a little
-        early or late), expect the same free robots and ready tasks, and still obey Eqs.
-        8-11 here."""
-        if self._planned_for is not state.instance:
-            return False
-        times = [p.time for p in self._plan]
-        now = plan_step_near(times, state.time, self.planned_makespan)
-        while self._plan and not self._plan[0].decision.assignments and (now is None or self._plan[0].time < now):
-            self._plan.popleft()
-        if not self._plan:
-            return False
-        p = self._plan[0]
-        if now is None or p.time != now or p.free != tuple(state.free_robots()) or p.ready != tuple(state.ready_tasks()):
-            return False
-        try:
-            check_decision(state, p.decision, self.name)
-        except PolicyError:  # e.g. a robot the plan sends is at another site than planned
-            return False
-        return True
-
     def decide(self, state: State) -> Decision:
-        if not self._follows(state):
-            self._plan.clear()  # a search that raises leaves no stale plan behind
-            self._planned_for = None
-            self._plan.extend(self.search(state))
-            self._planned_for = state.instance
+        if not self.plan.follows(state, self.name):
+            self.plan.clear()  # a search that raises leaves no stale plan behind
+            steps = self.search(state)
+            self.plan.replace(state.instance, steps, self.planned_makespan)
             self.searches += 1
-            if not self._plan:
+            if not steps:
                 self.fallbacks += 1
                 return self.rollout.base.decide(state)
-        return self._plan.popleft().decision
+        return self.plan.pop()
 
     def _finishes(self, state: State, deadline: float | None) -> Iterator[tuple[float, list[PlannedStep]]]:
         """LVWS's and GRP's finishes from ``state``, each as soon as it is done: (makespan,

@@ -51,6 +51,24 @@ class TrainConfig:
     wait_weight: float = 1.0  # the wait head's term (models with a wait head only)
     wait_pos_weight: float | None = None  # weight of the expert's waits; None: class balance (non-waits / waits)
     model: GATNConfig = field(default_factory=GATNConfig)
+    device: str = "cpu"  # where training runs: cpu, cuda, cuda:N, or auto (cuda when present)
+
+
+def training_device(name: str) -> torch.device:
+    """The torch device a training run asks for: ``auto`` is CUDA when torch sees a GPU,
+    else the CPU; a CUDA device that is not there is a ConfigError, not a crash."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        device = torch.device(name)
+    except (RuntimeError, ValueError) as exc:
+        raise ConfigError(f"--device: {name!r} is not a torch device ({exc})") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ConfigError(f"--device: {name!r} asked for, but torch sees no CUDA device here "
+                          f"(torch {torch.__version__}; use cpu or auto)")
+    if device.type not in ("cpu", "cuda"):
+        raise ConfigError(f"--device: {name!r}: training runs on cpu or cuda")
+    return device
 
 
 def wait_balance(demos: Sequence[Demo]) -> float:
@@ -65,6 +83,9 @@ def wait_balance(demos: Sequence[Demo]) -> float:
 
 def _loss(model: GATN, demos: Sequence[Demo], cfg: TrainConfig, pos_weight: float) -> torch.Tensor:
     batch, targets = batch_tensors(demos, use_idle=not cfg.dbgm)
+    device = next(model.parameters()).device
+    if device.type != "cpu":
+        batch, targets = batch.to(device), targets.to(device)
     r, wait = model.forward_with_wait(batch)
     return imitation_loss(r, targets, batch.entry_row, cfg.lam, cfg.choice_weight, wait_logits=wait,
                           wait_weight=cfg.wait_weight, wait_pos_weight=pos_weight)
@@ -116,8 +137,12 @@ def train(
 
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
+    device = training_device(cfg.device)
     if model is None:
         model = GATN(cfg.model)
+    model = model.to(device)
+    if device.type != "cpu":
+        log(f"training on {device} ({torch.cuda.get_device_name(device)})")
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     start_epoch = 0 if resume is None else _resume(resume, model, opt, log)
     # Batches of similar team sizes pad less (robots are padded per batch): sort, shuffle the batches.
@@ -143,7 +168,7 @@ def train(
         row = {"epoch": epoch + 1, "loss": statistics.fmean(losses), "seconds": time.perf_counter() - t0}
         if validate is not None:
             model.eval()
-            row["validation"] = validate(model)
+            row["validation"] = validate(model if device.type == "cpu" else copy.deepcopy(model).cpu())
             if row["validation"] < best_score:
                 best_score = row["validation"]
                 best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
@@ -154,6 +179,7 @@ def train(
                             epoch + 1)
     if best_state is not None:
         model.load_state_dict(best_state)
+    model = model.cpu()  # policies, validation and checkpoints run on the CPU
     model.eval()
     return model, history
 

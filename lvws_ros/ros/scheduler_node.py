@@ -9,8 +9,8 @@ whenever a robot becomes available or a task becomes ready. Names are relative
 second and on every event, with the node's fully qualified name as ``hardware_id``.
 
 Parameters (PARAMETERS: type, default, description, range; ``ros2 param describe``
-shows them): policy, fallback_policy, model_path, seed, decision_budget_ms, beam_width and
-ack_timeout may change at runtime: the on-set callback builds the new policies and
+shows them): policy, fallback_policy, model_path, seed, decision_budget_ms, beam_width,
+samples and ack_timeout may change at runtime: the on-set callback builds the new policies and
 applies them, or refuses the change with the reason (an unknown policy, a missing model,
 a number out of range; without a fallback, also a policy that cannot serve the current
 cell).
@@ -80,7 +80,9 @@ class Param:
 
 
 BEAM_BUDGET_MS = 1000.0  # lvws_beam's search budget when decision_budget_ms is 0
+SAMPLE_BUDGET_MS = 50.0  # lvws_sample's budget per decision when decision_budget_ms is 0
 MAX_BEAM_WIDTH = 1_000_000  # the beam_width parameter's range (a search that wide never ends within a budget)
+MAX_SAMPLES = 100_000  # the samples parameter's range
 
 PARAMETERS: dict[str, Param] = {
     "policy": Param(str, DEFAULT_POLICY, f"scheduling policy: {' | '.join(POLICY_NAMES)}"),
@@ -88,9 +90,12 @@ PARAMETERS: dict[str, Param] = {
                                          "'' for none"),
     "model_path": Param(str, "", "checkpoint of a learned policy; '' for the shipped one"),
     "seed": Param(int, 0, "seed of the random policies", 0, 2**31 - 1),
-    "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (lvws_rollout, "
-                                            "lvws_beam, exact) in ms; 0: their own limits (lvws_beam: "
-                                            f"{BEAM_BUDGET_MS:g} ms)", 0.0, 3.6e6),
+    "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (lvws_sample, "
+                                            "lvws_rollout, lvws_beam, exact) in ms; 0: their own limits "
+                                            f"(lvws_beam: {BEAM_BUDGET_MS:g} ms, lvws_sample: {SAMPLE_BUDGET_MS:g} ms)",
+                                0.0, 3.6e6),
+    "samples": Param(int, 0, "lvws_sample: schedules sampled in lockstep per round; 0: the sampler's default "
+                             "(lvws_ros/learning/sampling.py)", 0, MAX_SAMPLES),
     "beam_width": Param(int, 0, "lvws_beam: partial schedules kept at each depth of its search; 0: the search's "
                                 "default (lvws_ros/learning/search.py)", 0, MAX_BEAM_WIDTH),
     "ack_timeout": Param(float, 5.0, "seconds before an assignment the world did not take is offered again",
@@ -99,7 +104,8 @@ PARAMETERS: dict[str, Param] = {
                                         "to lvws/assignments", 0, 1000, read_only=True),
     "use_sim_time": Param(bool, False, "rclpy's: the node's clock follows /clock"),
 }
-RUNTIME_POLICY_PARAMETERS = ("policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "beam_width")
+RUNTIME_POLICY_PARAMETERS = ("policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "beam_width",
+                             "samples")
 SUBSCRIBER_WAIT = 20.0  # wall seconds the first decision waits for expect_subscribers
 SETTLE_SECONDS = 0.2  # wall time to wait for the matching team/graph message
 
@@ -164,12 +170,15 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
     if name == "lvws_rollout" and budget > 0:
         options["budget_ms"] = budget
     beam = {"budget_ms": beam_budget, "width": int(values["beam_width"]) or None}  # 0: the search's default
+    sample = {"budget_ms": budget if budget > 0 else SAMPLE_BUDGET_MS, "samples": int(values["samples"]) or None}
     if name == "lvws_beam":
         options.update(beam)
+    if name == "lvws_sample":
+        options.update(sample)
     if name == "exact" and budget > 0:
         options["time_limit"] = budget / 1000
     fallback = values["fallback_policy"]
-    backup = beam if fallback == "lvws_beam" else {}
+    backup = beam if fallback == "lvws_beam" else sample if fallback == "lvws_sample" else {}
     return (make_policy(name, seed=int(values["seed"]), **options),
             make_policy(fallback, seed=int(values["seed"]), **backup) if fallback else None)
 

@@ -143,3 +143,18 @@ def test_the_scheduler_node_gives_the_beam_a_budget_unless_told_one_and_its_widt
     assert isinstance(main, LVWSBeamPolicy) and main.budget_ms == 250.0 and main.width == 3
     _, backup = build_policies({**values, "policy": "grp", "fallback_policy": "lvws_beam", "beam_width": 5})
     assert isinstance(backup, LVWSBeamPolicy) and backup.width == 5 and backup.budget_ms == BEAM_BUDGET_MS
+
+
+def test_the_scheduler_node_gives_the_sampler_a_budget_unless_told_one_and_its_samples():
+    from lvws_ros.learning.sampling import DEFAULT_SAMPLES, LVWSSamplePolicy
+    from lvws_ros.ros.scheduler_node import SAMPLE_BUDGET_MS, build_policies
+
+    values = {name: par.default for name, par in PARAMETERS.items()}
+    values.update({"policy": "lvws_sample", "fallback_policy": "grp", "seed": 4})
+    main, _ = build_policies(values)
+    assert isinstance(main, LVWSSamplePolicy) and main.budget_ms == SAMPLE_BUDGET_MS
+    assert main.samples == DEFAULT_SAMPLES and main.seed == 4
+    main, _ = build_policies({**values, "decision_budget_ms": 20.0, "samples": 3})
+    assert isinstance(main, LVWSSamplePolicy) and main.budget_ms == 20.0 and main.samples == 3
+    _, backup = build_policies({**values, "policy": "grp", "fallback_policy": "lvws_sample", "samples": 5})
+    assert isinstance(backup, LVWSSamplePolicy) and backup.samples == 5 and backup.budget_ms == SAMPLE_BUDGET_MS
