@@ -22,7 +22,8 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     ``model_path`` for the learned ones (empty or None: the shipped checkpoint),
     ``budget_ms`` for ``lvws_rollout`` and ``lvws_sample`` (per decision step) and
     ``lvws_beam`` (per search; None: no budget), ``width`` for ``lvws_beam`` (None: its
-    default), ``samples`` and ``temperature`` for ``lvws_sample`` (None: its defaults; its
+    default), ``matching`` for ``lvws`` (greedy | exact; None: greedy), ``samples`` and
+    ``temperature`` for ``lvws_sample`` (None: its defaults; its
     noise is seeded by ``seed``); the learned ones ignore the options of the others."""
     if name == "grp":
         from lvws_ros.policies.baselines import GreedyPayloadPolicy
@@ -56,5 +57,7 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
 
             return LVWSBeamPolicy(model_path=model_path, budget_ms=options.get("budget_ms"),
                                   width=DEFAULT_WIDTH if options.get("width") is None else options["width"])
+        if name == "lvws":
+            return LVWSPolicy(model_path=model_path, matching=options.get("matching") or "greedy")
         return kinds[name](model_path=model_path)
     raise PolicyError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")

@@ -57,7 +57,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
         options = {"time_limit": args.time_limit, "workers": args.workers}
     elif args.policy in LEARNED_POLICIES:
         options = {"model_path": args.model, "budget_ms": args.budget_ms, "width": args.beam_width,
-                   "samples": args.samples, "temperature": args.temperature}
+                   "samples": args.samples, "temperature": args.temperature, "matching": args.matching}
     policy = make_policy(args.policy, seed=args.seed, **options)
     result = simulate(inst, policy)
     expert = getattr(policy, "result", None)
@@ -200,7 +200,8 @@ def _improve(args: argparse.Namespace, cfg: Any, own: list[Instance], init: Path
     train_set += large_instances(args.large, args.data_seed)
     icfg = ImproveConfig(rounds=args.improve, samples=args.samples, beam_width=args.improve_beam,
                          temperature=DEFAULT_TEMPERATURE if args.temperature is None else args.temperature,
-                         expert_time_limit=args.improve_expert, large=args.large, epochs=args.epochs, lr=args.lr,
+                         expert_time_limit=args.improve_expert, large=args.large, per_round=args.per_round,
+                         epochs=args.epochs, lr=args.lr,
                          seed=args.seed, processes=args.processes, ray_address=args.ray_address,
                          train=cfg.train)
     print(f"self-improvement: seed {args.seed}, data seed {args.data_seed}, {len(train_set)} training and "
@@ -237,6 +238,8 @@ def add_parsers(add: Adder) -> None:
                    help="lvws_sample: schedules sampled in lockstep per round (default: its DEFAULT_SAMPLES)")
     p.add_argument("--temperature", type=float, default=None,
                    help="lvws_sample: scale of the Gumbel noise on R (default: its DEFAULT_TEMPERATURE; 0: LVWS)")
+    p.add_argument("--matching", choices=("greedy", "exact"), default=None,
+                   help="lvws: Eqs. 7-11 on R by the paper's greedy (default) or exactly by CP-SAT")
     p.add_argument("--out", help="also write the schedule to this file")
 
     p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")
@@ -318,6 +321,8 @@ def _add_train(add: Adder) -> None:
                    help="also the beam search's schedule at this width (0: not)")
     g.add_argument("--improve-expert", type=float, default=0.0, metavar="SECONDS",
                    help="also the expert's schedule, CP-SAT within this limit (0: not)")
+    g.add_argument("--per-round", type=int, default=0,
+                   help="training instances drawn afresh for each round (0: all of them every round)")
     g.add_argument("--large", type=int, default=0,
                    help="training instances of the mixture at 20-60 robots x 50-200 tasks (no proof needed)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")

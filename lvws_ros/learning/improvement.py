@@ -19,7 +19,8 @@ round of self-improvement instead labels the policy's own best schedules:
   again from the best model with other samples.
 
 Self-labelling needs no proof, so the training instances may be larger than the expert
-can prove (``large``: the training mixture at 20-60 robots x 50-200 tasks). Every round
+can prove (``large``: the training mixture at 20-60 robots x 50-200 tasks). With
+``per_round``, each round samples on that many training instances drawn afresh. Every round
 is written to ``<out>.improve.pt`` (weights, round, history): a run stopped anywhere
 resumes from the last finished round.
 """
@@ -67,6 +68,7 @@ class ImproveConfig:
     beam_width: int = 0  # the search's schedule as a candidate (0: none)
     expert_time_limit: float = 0.0  # the expert's schedule as a candidate (0: none) [s]
     large: int = 0  # training instances of the mixture at LARGE_ROBOTS x LARGE_TASKS
+    per_round: int = 0  # training instances drawn afresh for each round (0: all of them every round)
     epochs: int = 4  # fine-tuning epochs per round
     lr: float = 5e-4
     seed: int = 0
@@ -229,9 +231,11 @@ def improve(init: str | Path, train_set: Sequence[Instance], val_set: Sequence[I
         t0 = time.perf_counter()
         state_dict = {k: v.detach().clone() for k, v in model.state_dict().items()}
         settings = {k: v for k, v in asdict(cfg).items() if k != "train"}
+        rng = np.random.default_rng([cfg.seed, rnd])
+        picked = list(train_set) if not 0 < cfg.per_round < len(train_set) else \
+            [train_set[k] for k in sorted(rng.choice(len(train_set), size=cfg.per_round, replace=False))]
         jobs = [(inst, state_dict, model.cfg.to_dict(), idle_bias, settings, int(seed))
-                for inst, seed in zip(train_set, np.random.default_rng([cfg.seed, rnd]).integers(2**31, size=len(
-                    train_set)), strict=True)]
+                for inst, seed in zip(picked, rng.integers(2**31, size=len(picked)), strict=True)]
         results = run_jobs(jobs, _round_job, processes=cfg.processes, ray_address=cfg.ray_address, progress=progress,
                            desc=f"round {rnd}: sampling")
         demos = [d for ds, _ in results for d in ds]

@@ -10,6 +10,8 @@
   are matched. Safety net: if every free robot chose to wait while nothing is running
   (which would stall the schedule), the matching is redone with all of them and without
   the idle task.
+* ``matching="exact"`` (ours): Eqs. 7-11 on R solved exactly (the maximum of Eq. 7, by
+  CP-SAT, :func:`~lvws_ros.policies.exact.exact_match`) instead of the paper's greedy.
 * ``dbgm``: a GAT-only network (no transformer, no global context), no idle task, and
   subteams only when no single free robot can do a task: one-to-one matching by reward
   first, then subteams for the tasks left that need them.
@@ -26,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, advance, simulate
-from lvws_ros.core.matching import greedy_match
+from lvws_ros.core.matching import Match, greedy_match
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
 from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint
@@ -35,6 +37,8 @@ from lvws_ros.learning.gatn import GATN, decision_outputs, reward_matrix
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 NO_VOLUNTARY_WAIT = -1e6  # idle bias that leaves waiting only to robots with nothing to do
+MATCHINGS = ("greedy", "exact")  # how LVWS solves Eqs. 7-11 on R at a decision step
+EXACT_MATCH_SECONDS = 1.0  # CP-SAT's limit for one decision step's exact matching
 
 
 def reachable(state: State, robots: Sequence[int], tasks: Sequence[int]) -> np.ndarray | None:
@@ -53,7 +57,11 @@ class LVWSPolicy:
     name = "lvws"
 
     def __init__(self, model: GATN | None = None, model_path: str | Path | None = None,
-                 idle_bias: float | None = None, wait_threshold: float | str | None = "checkpoint") -> None:
+                 idle_bias: float | None = None, wait_threshold: float | str | None = "checkpoint",
+                 matching: str = "greedy") -> None:
+        if matching not in MATCHINGS:
+            raise PolicyError(f"lvws: unknown matching {matching!r}; one of {', '.join(MATCHINGS)}")
+        self.matching = matching
         meta: dict[str, Any] = {}
         if model is None:
             model, meta = load_checkpoint(Path(model_path) if model_path else DEFAULT_MODELS["lvws"])
@@ -127,12 +135,23 @@ class LVWSPolicy:
             allowed = alone if allowed is None else allowed & alone
         args = (inst.robot_caps[robots], inst.robot_payload[robots], inst.task_caps[ready], inst.task_payload[ready],
                 allowed)
-        match = greedy_match(sub, *args)
+        match = self._match(sub, *args)
         if not match.teams and not (state.task_status == TaskStatus.ASSIGNED).any():
             _idle_last(sub)  # waiting now would stall: take the best task instead
-            match = greedy_match(sub, *args)
+            match = self._match(sub, *args)
         assignments = tuple((ready[j], tuple(robots[i] for i in team)) for j, team in sorted(match.teams.items()))
         return Decision(assignments, tuple(robots[i] for i in match.waiting))
+
+    def _match(self, r: np.ndarray, robot_caps: np.ndarray, robot_payload: np.ndarray, task_caps: np.ndarray,
+               task_payload: np.ndarray, allowed: np.ndarray | None) -> Match:
+        """Eqs. 7-11 on ``r``: the paper's sequential greedy, or (``matching="exact"``) the
+        maximum of Eq. 7 by CP-SAT (within EXACT_MATCH_SECONDS; its best when not proven)."""
+        if self.matching == "greedy":
+            return greedy_match(r, robot_caps, robot_payload, task_caps, task_payload, allowed)
+        from lvws_ros.policies.exact import exact_match
+
+        return exact_match(r, robot_caps, robot_payload, task_caps, task_payload, allowed=allowed,
+                           time_limit=EXACT_MATCH_SECONDS, workers=1)
 
     def decide(self, state: State) -> Decision:
         free = state.free_robots()

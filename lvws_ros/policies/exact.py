@@ -578,16 +578,24 @@ def exact_match(
     time_limit: float = 10.0,
     workers: int = 2,
     necessary_only: bool = True,
+    allowed: BoolArray | None = None,
 ) -> Match:
     """Optimal A* of Eqs. 7-11 with CP-SAT (rewards scaled to integers, 1e-6 resolution).
 
     With ``necessary_only`` (the default, the same problem :func:`~lvws_ros.core.matching.greedy_match` solves)
     every member of a subteam must be needed: without it the task would lack a capability
     or payload. Without it, any robot may join a covered task when that pays more.
+    ``allowed`` (n, m), as for the greedy matching, limits each task to the robots allowed
+    for it (with travel: those that can reach it at all); None allows every pair.
     """
     n, m = check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
+    if allowed is not None and allowed.shape != (n, m):
+        raise ValueError(f"allowed has shape {allowed.shape}, expected ({n}, {m})")
     model = cp_model.CpModel()
     a = [[model.new_bool_var(f"a_{i}_{j}") for j in range(m + 1)] for i in range(n)]
+    if allowed is not None:
+        for i, j in zip(*np.nonzero(~allowed), strict=True):
+            model.add(a[i][j] == 0)
     z = [model.new_bool_var(f"z_{j}") for j in range(m)]
     pay = np.round(robot_payload * 1000).astype(np.int64)
     need = np.ceil(task_payload * 1000 - TOLERANCE).astype(np.int64)

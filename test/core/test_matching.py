@@ -87,3 +87,16 @@ def test_shape_and_value_errors():
 def test_feasibility_mask_has_idle_column():
     x = feasibility_mask(np.array([[1, 0], [0, 1]], bool), np.array([[1, 0]], bool), np.ones(2), np.zeros(1))
     assert x.tolist() == [[True, True], [False, True]]
+
+
+def test_exact_matching_keeps_to_the_allowed_pairs_and_is_never_worse_than_greedy_there():
+    rng = np.random.default_rng(11)
+    for _ in range(25):
+        case = random_matching_case(rng, int(rng.integers(2, 7)), int(rng.integers(1, 6)))
+        n, m = case[0].shape[0], case[0].shape[1] - 1
+        allowed = rng.random((n, m)) < 0.7
+        g = greedy_match(*case, allowed)
+        e = exact_match(*case, time_limit=10, allowed=allowed)
+        assert_valid(e, *case)
+        assert all(allowed[i, j] for j, team in e.teams.items() for i in team)
+        assert e.reward >= g.reward - 1e-5
