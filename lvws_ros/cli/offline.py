@@ -178,7 +178,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg = PipelineConfig(datasets=datasets, data_seed=args.data_seed, count=args.count, families=families,
                          validation_per_dataset=args.validation, dagger_rounds=args.dagger_rounds,
                          dagger_instances=args.dagger_instances, dagger_epochs=args.dagger_epochs,
-                         label_time_limit=args.label_time_limit, processes=args.processes,
+                         label_time_limit=args.label_time_limit, targets=args.targets, processes=args.processes,
                          ray_address=args.ray_address, train=train_cfg)
     if args.improve:
         return _improve(args, cfg, own, init or DEFAULT_MODELS["lvws"])
@@ -203,7 +203,7 @@ def _improve(args: argparse.Namespace, cfg: Any, own: list[Instance], init: Path
                          expert_time_limit=args.improve_expert, large=args.large, per_round=args.per_round,
                          epochs=args.epochs, lr=args.lr,
                          seed=args.seed, processes=args.processes, ray_address=args.ray_address,
-                         train=cfg.train)
+                         targets=args.targets, train=cfg.train)
     print(f"self-improvement: seed {args.seed}, data seed {args.data_seed}, {len(train_set)} training and "
           f"{len(val_set)} validation instances", file=sys.stderr)
     improve(init, train_set, val_set, icfg, args.out, cache_dir=args.cache_dir, resume=args.resume,
@@ -287,6 +287,9 @@ def _add_train(add: Adder) -> None:
     p.add_argument("--init", default=None,
                    help="start from this checkpoint ('shipped': the shipped model): fine-tuning")
     p.add_argument("--label-time-limit", type=float, default=5.0, help="CP-SAT time limit per labelled state [s]")
+    p.add_argument("--targets", choices=("eq12", "dense"), default="eq12",
+                   help="expert targets: the paper's Eq. 12 labels (default), or dense ones over every task later in "
+                        "a robot's schedule with a learned idle")
     p.add_argument("--count", type=int, default=None, help="training instances per dataset (default: all)")
     p.add_argument("--validation", type=int, default=100, help="held-out training instances per dataset")
     p.add_argument("--data-seed", type=int, default=0)

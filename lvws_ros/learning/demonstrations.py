@@ -51,14 +51,25 @@ from lvws_ros.learning.loss import Demo, feasibility_mask
 from lvws_ros.policies.exact import ExactPolicy, departures, solve_exact
 
 GAMMA = 0.9
+TARGETS = ("eq12", "dense")
+"""Expert targets. ``eq12``: the paper's (module docstring). ``dense`` (after Sadcher):
+E_ij = gamma^((end_j - t) / d) for every task j in robot i's schedule from this state on,
+the one it takes now and the later ones, d the mean task duration; a free robot the
+schedule leaves idle gets gamma^((s - t) / d) on the idle column, s when its next task
+sets out (the end of the schedule if none): above that task's own target, so waiting
+for it is learnt where the schedule waits (Eq. 7's idle task, learned voluntary waiting)."""
 
 
 def label_state(state: State, schedule: Schedule, gamma: float = GAMMA,
-                started: Decision | None = None) -> tuple[np.ndarray, np.ndarray]:
+                started: Decision | None = None, targets: str = "eq12") -> tuple[np.ndarray, np.ndarray]:
     """E and X of one state, from a schedule that continues from it. The tasks the
     schedule assigns at this state are those whose subteam sets out now (the expert's
     left-shifted schedule), or, with ``started``, the decision taken in this state (a
-    policy's own schedule, whose departures are its decisions)."""
+    policy's own schedule, whose departures are its decisions).
+
+    ``targets``: "eq12" (the paper's, module docstring) or "dense" (:data:`TARGETS`)."""
+    if targets not in TARGETS:
+        raise ValueError(f"unknown targets {targets!r}; one of {', '.join(TARGETS)}")
     inst = state.instance
     n, m = inst.num_robots, inst.num_tasks
     t = state.time
@@ -71,6 +82,8 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA,
     free = state.robot_available()
     assigned: set[int] = set()
     next_end = np.full(n, np.inf)
+    next_leave = np.full(n, np.inf)  # dense targets: when the robot's next task sets out
+    unit = float(inst.durations.mean()) if m else 1.0  # dense targets discount per mean task duration
     # the expert assigns a task at its departure: its start, or (travel) when its subteam sets out
     leave = departures(inst, schedule, state) if inst.travel is not None and started is None else {}
     now = None if started is None else {task for task, _ in started.assignments}
@@ -80,15 +93,21 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA,
         assign_at = t if now is not None and j in now else leave.get(a.task, a.start)
         if abs(assign_at - t) <= TOLERANCE and np.isnan(state.task_start[j]):
             for r in robots:
-                e[r, j] = gamma ** steps_until(a.end)
+                e[r, j] = gamma ** (steps_until(a.end) if targets == "eq12" else (a.end - t) / unit)
                 assigned.add(r)
         elif assign_at > t + TOLERANCE:
             for r in robots:
                 next_end[r] = min(next_end[r], a.end)
+                if targets == "dense":  # every task later in the robot's schedule, discounted by its end
+                    e[r, j] = gamma ** ((a.end - t) / unit)
+                    next_leave[r] = min(next_leave[r], assign_at)
     makespan = max(ends) if ends else t
     for w in np.flatnonzero(free):
         if w not in assigned:
-            e[w, m] = gamma ** steps_until(next_end[w] if np.isfinite(next_end[w]) else makespan)
+            if targets == "eq12":
+                e[w, m] = gamma ** steps_until(next_end[w] if np.isfinite(next_end[w]) else makespan)
+            else:  # left idle until its next task sets out: above that task's own target
+                e[w, m] = gamma ** (((next_leave[w] if np.isfinite(next_leave[w]) else makespan) - t) / unit)
     ready = np.zeros(m, dtype=bool)
     ready[state.ready_tasks()] = True
     x = feasibility_mask(inst.robot_caps, inst.task_caps, inst.robot_payload, inst.task_payload)
@@ -99,26 +118,27 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA,
     return e, x
 
 
-def demo(state: State, schedule: Schedule, cache: InstanceFeatures, started: Decision | None = None) -> Demo:
+def demo(state: State, schedule: Schedule, cache: InstanceFeatures, started: Decision | None = None,
+         targets: str = "eq12") -> Demo:
     """The demonstration of ``state``: its features and E, X on the entries it reads
-    (``started``: as :func:`label_state`)."""
+    (``started``, ``targets``: as :func:`label_state`)."""
     feats = cache.encode(state)
-    e, x = label_state(state, schedule, started=started)
+    e, x = label_state(state, schedule, started=started, targets=targets)
     cols = [*feats.task_ids[feats.cols[:-1]], state.instance.num_tasks]
     pick = np.ix_(feats.rows, cols)
     return Demo(feats, e[pick], x[pick])
 
 
-def expert_demos(inst: Instance, time_limit: float = 30.0, workers: int = 2) -> list[Demo]:
+def expert_demos(inst: Instance, time_limit: float = 30.0, workers: int = 2, targets: str = "eq12") -> list[Demo]:
     """Demonstrations along the expert's own schedule."""
     policy = ExactPolicy(time_limit=time_limit, workers=workers)
     run = simulate(inst, policy, record_states=True)
     cache = InstanceFeatures(inst)
-    return [demo(step.state, run.schedule, cache) for step in run.steps if step.state is not None]
+    return [demo(step.state, run.schedule, cache, targets=targets) for step in run.steps if step.state is not None]
 
 
 def dagger_demos(inst: Instance, policy: Policy, time_limit: float = 30.0, workers: int = 2,
-                 max_states: int | None = None) -> list[Demo]:
+                 max_states: int | None = None, targets: str = "eq12") -> list[Demo]:
     """States visited by ``policy``, each labelled by the expert solving from that state."""
     run = simulate(inst, policy, record_states=True)
     states = [s.state for s in run.steps if s.state is not None]
@@ -130,11 +150,11 @@ def dagger_demos(inst: Instance, policy: Policy, time_limit: float = 30.0, worke
     for state in states:
         res = solve_exact(inst, state=state, time_limit=time_limit, workers=workers)
         assert res.schedule is not None
-        out.append(demo(state, res.schedule, cache))
+        out.append(demo(state, res.schedule, cache, targets=targets))
     return out
 
 
-def _expert_job(args: tuple[Instance, float, int]) -> list[Demo]:
+def _expert_job(args: tuple[Instance, float, int, str]) -> list[Demo]:
     return expert_demos(*args)
 
 
@@ -180,12 +200,13 @@ def label_instances(
     jobs: Sequence[Any] | None = None,
     job: Callable[[Any], list[Demo]] = _expert_job,
     progress: bool = True,
+    targets: str = "eq12",
 ) -> list[Demo]:
     """Label many instances in parallel (:func:`run_jobs`). By default each job is the
-    expert's own run on one instance; ``jobs``/``job`` run other labelling (DAgger) the
-    same way."""
+    expert's own run on one instance (``targets``: as :func:`label_state`); ``jobs``/``job``
+    run other labelling (DAgger) the same way."""
     if jobs is None:
-        jobs = [(inst, time_limit, workers) for inst in instances]
+        jobs = [(inst, time_limit, workers, targets) for inst in instances]
     results = run_jobs(jobs, job, processes=processes, ray_address=ray_address, progress=progress)
     return [d for demos in results for d in demos]
 

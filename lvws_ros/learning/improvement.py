@@ -75,6 +75,7 @@ class ImproveConfig:
     processes: int = 2
     ray_address: str | None = None
     validation_time_limit: float = 10.0  # CP-SAT per validation instance, to prove its optimum
+    targets: str = "eq12"  # the labels' targets: eq12 | dense (lvws_ros.learning.demonstrations.TARGETS)
     train: TrainConfig = field(default_factory=TrainConfig)
 
 
@@ -147,13 +148,13 @@ def candidates(inst: Instance, policy: LVWSPolicy, cfg: ImproveConfig, rng: np.r
     return out
 
 
-def label(inst: Instance, chosen: Candidate, cache: InstanceFeatures | None = None) -> list[Demo]:
+def label(inst: Instance, chosen: Candidate, targets: str = "eq12") -> list[Demo]:
     """Demonstrations along ``chosen``: each state with a decision to make, labelled by
-    the schedule with the decision taken there."""
-    cache = cache or InstanceFeatures(inst)
+    the schedule with the decision taken there (``targets``: eq12 | dense)."""
+    cache = InstanceFeatures(inst)
     schedule = schedule_from_state(chosen.final, chosen.kind)
-    return [demo(s, schedule, cache, started=d) for s, d in zip(chosen.states, chosen.decisions, strict=True)
-            if s.free_robots() and s.ready_tasks()]
+    return [demo(s, schedule, cache, started=d, targets=targets)
+            for s, d in zip(chosen.states, chosen.decisions, strict=True) if s.free_robots() and s.ready_tasks()]
 
 
 def _round_job(args: tuple[Instance, dict[str, Any], dict[str, Any], float, dict[str, Any], int]
@@ -167,7 +168,7 @@ def _round_job(args: tuple[Instance, dict[str, Any], dict[str, Any], float, dict
     found = candidates(inst, policy, cfg, np.random.default_rng(seed))
     chosen = choose(found)
     best = {k: min((c.makespan for c in found if c.kind == k), default=math.nan) for k in KINDS}
-    return label(inst, chosen), {**best, "chosen": float(KINDS.index(chosen.kind))}
+    return label(inst, chosen, cfg.targets), {**best, "chosen": float(KINDS.index(chosen.kind))}
 
 
 def validation_optima(instances: Sequence[Instance], time_limit: float, cache: Path | None,

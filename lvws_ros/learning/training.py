@@ -203,6 +203,7 @@ class PipelineConfig:
     dagger_epochs: int = 6
     dagger_states: int = 8  # labelled states per rollout, spread over the run
     label_time_limit: float = 5.0
+    targets: str = "eq12"  # expert targets: eq12 | dense (lvws_ros.learning.demonstrations.TARGETS)
     processes: int = 2
     ray_address: str | None = None
     train: TrainConfig = field(default_factory=TrainConfig)
@@ -255,8 +256,9 @@ def _cache_path(cache_dir: str | Path, cfg: PipelineConfig, train_set: Sequence[
     every training instance and the expert's time limit."""
     digest = hashlib.sha256("".join(instance_key(i) for i in train_set).encode()).hexdigest()[:12]
     version = DEMOS_FORMAT.split("/")[-1]
+    kind = "" if cfg.targets == "eq12" else f"-{cfg.targets}"
     return Path(cache_dir) / (f"demos{version}-{sources}-s{cfg.data_seed}-n{len(train_set)}"
-                              f"-t{cfg.label_time_limit:g}-{digest}.npz")
+                              f"-t{cfg.label_time_limit:g}{kind}-{digest}.npz")
 
 
 def _cached_demos(cache: Path, log: Callable[[str], None]) -> list[Demo] | None:
@@ -276,14 +278,14 @@ def _policy(model: GATN, dbgm: bool, idle_bias: float, wait_threshold: float | N
                                                           wait_threshold=wait_threshold)
 
 
-def _dagger_job(args: tuple[Instance, dict[str, Any], dict[str, Any], bool, float, float | None, float, int]
+def _dagger_job(args: tuple[Instance, dict[str, Any], dict[str, Any], bool, float, float | None, float, int, str]
                 ) -> list[Demo]:
-    inst, state_dict, model_cfg, dbgm, idle_bias, threshold, time_limit, max_states = args
+    inst, state_dict, model_cfg, dbgm, idle_bias, threshold, time_limit, max_states, targets = args
     torch.set_num_threads(1)  # one process per core
     model = GATN(GATNConfig.from_dict(model_cfg))
     model.load_state_dict(state_dict)
     return dagger_demos(inst, _policy(model.eval(), dbgm, idle_bias, threshold), time_limit=time_limit, workers=1,
-                        max_states=max_states)
+                        max_states=max_states, targets=targets)
 
 
 @dataclass(frozen=True)
@@ -363,7 +365,7 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
         if got is None:
             t0 = time.perf_counter()
             got = label_instances(part, processes=cfg.processes, time_limit=cfg.label_time_limit,
-                                  ray_address=cfg.ray_address, progress=progress)
+                                  ray_address=cfg.ray_address, progress=progress, targets=cfg.targets)
             log(f"expert demonstrations ({sources}): {len(got)} states in {time.perf_counter() - t0:.0f} s")
             if cache is not None:
                 save_demos(got, cache, {"datasets": cfg.datasets, "data_seed": cfg.data_seed})
@@ -381,7 +383,7 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
         picks = rng.choice(len(train_set), size=min(cfg.dagger_instances, len(train_set)), replace=False)
         state_dict = {k: v.detach().clone() for k, v in model.state_dict().items()}
         jobs = [(train_set[k], state_dict, model.cfg.to_dict(), tcfg.dbgm, best.idle_bias, best.wait_threshold,
-                 cfg.label_time_limit, cfg.dagger_states) for k in picks]
+                 cfg.label_time_limit, cfg.dagger_states, cfg.targets) for k in picks]
         t0 = time.perf_counter()
         new = label_instances([], processes=cfg.processes, ray_address=cfg.ray_address, progress=progress,
                               jobs=jobs, job=_dagger_job)

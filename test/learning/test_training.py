@@ -41,6 +41,27 @@ def test_expert_reward_matrix_reproduces_the_expert_decision(key, index):
         assert greedy_on(r, step.state) == sorted((j, tuple(sorted(t))) for j, t in step.decision.assignments)
 
 
+@pytest.mark.parametrize(("key", "index"), [("I", 3), ("II", 4), ("IV", 2)])
+def test_dense_targets_rank_the_experts_decision_first_and_reach_later_tasks(key, index):
+    """Dense targets: the greedy matching on them takes the expert's decision, a robot's
+    later tasks that are ready now get targets below its current one, and a robot the
+    expert keeps waiting has its idle target above its next task's."""
+    inst = dataset_instance(DATASETS[key], index, seed=0)
+    run = simulate(inst, ExactPolicy(workers=2), record_states=True)
+    later = 0
+    for step in run.steps:
+        e, x = label_state(step.state, run.schedule, targets="dense")
+        eq12, x12 = label_state(step.state, run.schedule)
+        np.testing.assert_array_equal(x, x12)
+        free, ready = step.state.free_robots(), step.state.ready_tasks()
+        read = np.ix_(free, [*ready, inst.num_tasks])  # the entries a decision reads
+        assert np.all((e >= 0) & (e <= 1)) and not np.any(e[read][~x[read]])
+        r = np.where(x, e, -1.0)
+        assert greedy_on(r, step.state) == sorted((j, tuple(sorted(t))) for j, t in step.decision.assignments)
+        later += int(((e[:, :-1] > 0) & (eq12[:, :-1] == 0) & x[:, :-1]).sum())
+    assert later > 0, "some robot has a later task that is ready now"
+
+
 def test_parallel_and_ray_labelling_match_serial():
     insts = [dataset_instance(DATASETS["I"], k, seed=0) for k in range(4)]
     # One CP-SAT worker is deterministic; several may return different optima.
