@@ -153,8 +153,45 @@ def cmd_gantt(args: argparse.Namespace) -> int:
     return 0
 
 
+# Named training recipes: the stages (train's own flags) that produced a model. "shipped"
+# reproduces lvws_ros/learning/models/lvws.pt (its log: lvws.training.txt beside it); a
+# stage's "{previous}" is the checkpoint the stage before wrote.
+RECIPES: dict[str, tuple[tuple[str, ...], ...]] = {
+    "shipped": (
+        ("--datasets", "I,II,IV", "--count", "2500", "--families", "mixed", "--family-count", "4000",
+         "--epochs", "15", "--dagger-rounds", "1", "--dagger-instances", "1000", "--dagger-epochs", "5",
+         "--label-time-limit", "5"),
+    ),
+}
+RECIPE_PASSED = ("--cache-dir", "--processes", "--ray-address", "--device")  # the run's own, kept per stage
+
+
+def _run_recipe(args: argparse.Namespace) -> int:
+    """``lvws train --recipe NAME --out OUT``: each stage of the recipe with its own
+    flags (the stages before the last write OUT's ``.stageN.pt``)."""
+    from lvws_ros.cli.main import build_parser
+
+    stages = RECIPES[args.recipe]
+    out = Path(args.out)
+    passed = [x for flag in RECIPE_PASSED if (value := getattr(args, flag[2:].replace("-", "_"))) is not None
+              for x in (flag, str(value))] + (["--quiet"] if args.quiet else [])
+    previous = ""
+    for k, stage in enumerate(stages, start=1):
+        target = out if k == len(stages) else out.with_suffix(f".stage{k}.pt")
+        argv = ["train", *(a.replace("{previous}", previous) for a in stage), *passed, "--out", str(target)]
+        print(f"recipe {args.recipe}, stage {k} of {len(stages)}: lvws {' '.join(argv)}", file=sys.stderr)
+        stage_args = build_parser().parse_args(argv)
+        if cmd_train(stage_args) != 0:
+            return 1
+        previous = str(target)
+    return 0
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     from lvws_ros.learning.checkpoint import DEFAULT_MODELS
+
+    if getattr(args, "recipe", None):
+        return _run_recipe(args)
     from lvws_ros.learning.gatn import GATNConfig
     from lvws_ros.learning.training import PipelineConfig, TrainConfig, run_pipeline
 
@@ -278,6 +315,9 @@ def _add_evaluate(add: Adder) -> None:
 def _add_train(add: Adder) -> None:
     p = add("train", cmd_train, "imitation learning of the GATN (Eq. 12) on expert demonstrations, with DAgger")
     p.add_argument("--out", required=True, help="checkpoint to write (e.g. my_model.pt)")
+    p.add_argument("--recipe", choices=sorted(RECIPES), default=None,
+                   help="run a named recipe's stages ('shipped': how the shipped model was trained); only --out, "
+                        f"--quiet and {', '.join(RECIPE_PASSED)} are taken from the command line")
     p.add_argument("--datasets", default="I,II", help="training splits to use, comma-separated ('' for none)")
     p.add_argument("--families", default="mixed",
                    help=f"training families, comma-separated ('' for none; from {list(TRAINING_FAMILIES)})")

@@ -8,9 +8,9 @@ noisy reward matrices and POMO the best of many starts:
   lockstep step the states that need a decision are encoded, the distinct ones go through
   one batched forward pass (:func:`~lvws_ros.learning.gatn.batch_decision_outputs`), and
   each schedule's matching runs on R plus Gumbel noise scaled by ``temperature``;
-* each decision step first takes LVWS's own schedule from its state (noise-free, alone),
-  so the result is never longer than LVWS's (on the executor's model) and a plan exists
-  early under a budget;
+* a step without a plan to follow first takes LVWS's own schedule from its state
+  (noise-free, alone), so the result is never longer than LVWS's (on the executor's
+  model) and a plan exists early under a budget;
 * the policy follows the shortest schedule found (as ``lvws_beam`` does, with
   :data:`~lvws_ros.core.executor.PLAN_DRIFT`), and at every decision step samples again
   from the state it is in, replacing the plan only by a shorter schedule: each decision
@@ -145,12 +145,14 @@ class LVWSSamplePolicy:
         self.rng = np.random.default_rng(seed)
         self.searches = 0  # decision steps that sampled (since reset)
         self.fallbacks = 0  # steps decided by LVWS alone: the budget was spent before any schedule was found
+        self._one = math.inf  # seconds per sampled schedule in the latest whole round (sizes rounds under a budget)
 
     def reset(self, instance: Instance) -> None:
         self.base.reset(instance)
         self.plan.clear()
         self.rng = np.random.default_rng(self.seed)
         self.searches = self.fallbacks = 0
+        self._one = math.inf
 
     @property
     def planned_makespan(self) -> float:
@@ -167,19 +169,20 @@ class LVWSSamplePolicy:
             self.plan.clear()
         best = self.plan.makespan if self.plan.steps else math.inf
         self.searches += 1
-        rounds = [(1, 0.0)]  # LVWS's own schedule from here first
+        rounds = [] if self.plan.steps else [(1, 0.0)]  # without a plan, LVWS's own schedule from here first
         if self.temperature > 0:
             rounds += [(self.samples, self.temperature)] * self.rounds
-        k, one = 0, math.inf  # one: seconds LVWS's own schedule took (sizes the rounds under a budget)
+        k, one = 0, self._one  # seconds one schedule took (sizes the rounds under a budget)
         while k < len(rounds) or (deadline is not None and self.temperature > 0):
             count, temperature = rounds[k] if k < len(rounds) else (self.samples, self.temperature)
             k += 1
             t0 = time.perf_counter()
-            if deadline is not None and k > 1 and math.isfinite(one):  # as many as the budget left is likely to fit
+            if deadline is not None and math.isfinite(one):  # as many as the budget left is likely to fit
                 count = min(count, max(1, int((deadline - t0) / max(one, 1e-6))))
             found = sample_schedules(self.base, state, count, temperature, self.rng, deadline=deadline)
-            if k == 1 and found:
-                one = time.perf_counter() - t0
+            spent = time.perf_counter()
+            if deadline is None or spent <= deadline:  # a whole round: its time per schedule
+                one = self._one = (spent - t0) / count
             for s in found:
                 if s.makespan < best - TOLERANCE:
                     best = s.makespan

@@ -133,3 +133,36 @@ def test_training_on_the_cpu_gives_a_cpu_model():
 def test_training_on_cuda_gives_a_cpu_model_for_the_policies():
     model, history = _tiny_training("cuda")
     assert len(history) == 2 and all(p.device.type == "cpu" for p in model.parameters())
+
+
+def test_the_shipped_recipe_is_the_command_in_the_shipped_models_log():
+    from lvws_ros.cli.main import build_parser
+    from lvws_ros.cli.offline import RECIPES
+    from lvws_ros.learning.checkpoint import MODEL_DIR
+
+    log = (MODEL_DIR / "lvws.training.txt").read_text()
+    commands = [line.split("lvws train", 1)[1].split() for line in log.splitlines() if "# command" in line
+                and "lvws train" in line]
+    stages = RECIPES["shipped"]
+    assert len(commands) == len(stages)
+    for stage, command in zip(stages, commands, strict=True):
+        build_parser().parse_args(["train", *stage, "--out", "x.pt"])  # every stage's flags parse
+        given = [a for a in command if a not in ("CACHE", "PREVIOUS")]
+        assert " ".join(a for a in stage if "{previous}" not in a) in " ".join(given)
+
+
+def test_a_recipe_runs_its_stages_in_order(tmp_path, monkeypatch, small_model):
+    from lvws_ros.cli import offline
+
+    init = tmp_path / "tiny.pt"
+    save_checkpoint(init, small_model, {"kind": "lvws", "idle_bias": NO_VOLUNTARY_WAIT})
+    tiny = (("--improve", "1", "--init", str(init), "--datasets", "IV", "--count", "8", "--families", "",
+             "--validation", "2", "--samples", "2", "--epochs", "1", "--seed", "1"),
+            ("--improve", "1", "--init", "{previous}", "--datasets", "IV", "--count", "8", "--families", "",
+             "--validation", "2", "--samples", "2", "--epochs", "1", "--seed", "2"))
+    monkeypatch.setitem(offline.RECIPES, "tiny", tiny)
+    out = tmp_path / "final.pt"
+    assert main(["train", "--recipe", "tiny", "--out", str(out), "--processes", "1", "--quiet"]) == 0
+    first = load_checkpoint(tmp_path / "final.stage1.pt")[1]
+    final = load_checkpoint(out)[1]
+    assert first["init"] == str(init) and final["init"] == str(tmp_path / "final.stage1.pt")
