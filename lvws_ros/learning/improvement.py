@@ -22,7 +22,10 @@ Self-labelling needs no proof, so the training instances may be larger than the 
 can prove (``large``: the training mixture at 20-60 robots x 50-200 tasks). With
 ``per_round``, each round samples on that many training instances drawn afresh. Every round
 is written to ``<out>.improve.pt`` (weights, round, history): a run stopped anywhere
-resumes from the last finished round.
+resumes from the last finished round (each round's model, kept or not, is
+``<out>.roundN.pt``). With ``replay`` every round trains on all labels so far; at most
+``states_per_instance`` states are labelled per instance, spread over its schedule, so
+a large instance weighs as a few small ones.
 """
 
 from __future__ import annotations
@@ -69,6 +72,8 @@ class ImproveConfig:
     expert_time_limit: float = 0.0  # the expert's schedule as a candidate (0: none) [s]
     large: int = 0  # training instances of the mixture at LARGE_ROBOTS x LARGE_TASKS
     per_round: int = 0  # training instances drawn afresh for each round (0: all of them every round)
+    states_per_instance: int = 24  # labelled states per instance, spread over its schedule (0: all)
+    replay: bool = True  # train on the labels of every round so far, not only this round's
     epochs: int = 4  # fine-tuning epochs per round
     lr: float = 5e-4
     seed: int = 0
@@ -148,13 +153,16 @@ def candidates(inst: Instance, policy: LVWSPolicy, cfg: ImproveConfig, rng: np.r
     return out
 
 
-def label(inst: Instance, chosen: Candidate, targets: str = "eq12") -> list[Demo]:
+def label(inst: Instance, chosen: Candidate, targets: str = "eq12", max_states: int = 0) -> list[Demo]:
     """Demonstrations along ``chosen``: each state with a decision to make, labelled by
-    the schedule with the decision taken there (``targets``: eq12 | dense)."""
+    the schedule with the decision taken there (``targets``: eq12 | dense); at most
+    ``max_states`` of them, spread over the schedule (0: all)."""
     cache = InstanceFeatures(inst)
     schedule = schedule_from_state(chosen.final, chosen.kind)
-    return [demo(s, schedule, cache, started=d, targets=targets)
-            for s, d in zip(chosen.states, chosen.decisions, strict=True) if s.free_robots() and s.ready_tasks()]
+    steps = [(s, d) for s, d in zip(chosen.states, chosen.decisions, strict=True) if s.free_robots() and s.ready_tasks()]
+    if 0 < max_states < len(steps):  # spread over the schedule: a large instance weighs as a few small ones
+        steps = [steps[k] for k in np.linspace(0, len(steps) - 1, max_states).round().astype(int)]
+    return [demo(s, schedule, cache, started=d, targets=targets) for s, d in steps]
 
 
 def _round_job(args: tuple[Instance, dict[str, Any], dict[str, Any], float, dict[str, Any], int]
@@ -168,7 +176,7 @@ def _round_job(args: tuple[Instance, dict[str, Any], dict[str, Any], float, dict
     found = candidates(inst, policy, cfg, np.random.default_rng(seed))
     chosen = choose(found)
     best = {k: min((c.makespan for c in found if c.kind == k), default=math.nan) for k in KINDS}
-    return label(inst, chosen, cfg.targets), {**best, "chosen": float(KINDS.index(chosen.kind))}
+    return label(inst, chosen, cfg.targets, cfg.states_per_instance), {**best, "chosen": float(KINDS.index(chosen.kind))}
 
 
 def validation_optima(instances: Sequence[Instance], time_limit: float, cache: Path | None,
@@ -228,6 +236,7 @@ def improve(init: str | Path, train_set: Sequence[Instance], val_set: Sequence[I
         log(f"resumed from {resume} after round {first - 1} (validation {best_score:.2f} %)")
     log(f"self-improvement from {init}: {len(train_set)} training instances, {len(optima)} validation optima; "
         f"round 0: LVWS {best_score:.2f} % on validation (seed {cfg.seed})")
+    replayed: list[Demo] = []  # with replay: every round's labels so far (not kept across a resume)
     for rnd in range(first, cfg.rounds + 1):
         t0 = time.perf_counter()
         state_dict = {k: v.detach().clone() for k, v in model.state_dict().items()}
@@ -239,7 +248,9 @@ def improve(init: str | Path, train_set: Sequence[Instance], val_set: Sequence[I
                 for inst, seed in zip(picked, rng.integers(2**31, size=len(picked)), strict=True)]
         results = run_jobs(jobs, _round_job, processes=cfg.processes, ray_address=cfg.ray_address, progress=progress,
                            desc=f"round {rnd}: sampling")
-        demos = [d for ds, _ in results for d in ds]
+        new = [d for ds, _ in results for d in ds]
+        replayed = [*replayed, *new] if cfg.replay else new
+        demos = replayed
         stats = [st for _, st in results]
         gain = statistics.fmean(100 * (st["lvws"] - min(st[k] for k in KINDS if not math.isnan(st[k]))) / st["lvws"]
                                 for st in stats)
@@ -250,10 +261,12 @@ def improve(init: str | Path, train_set: Sequence[Instance], val_set: Sequence[I
         candidate, fit = train(demos, tcfg, model=copy.deepcopy(model), progress=progress, log=log)
         score = validation_score(candidate, val_set, optima, idle_bias)
         kept = score < best_score
-        row = {"round": rnd, "states": len(demos), "chosen": chosen, "best_below_lvws_percent": gain,
+        save_checkpoint(Path(out).with_suffix(f".round{rnd}.pt"), candidate,
+                        {**meta, "round": rnd, "validation_suboptimality": score, "kept": kept})
+        row = {"round": rnd, "states": len(new), "trained_on": len(demos), "chosen": chosen, "best_below_lvws_percent": gain,
                "labelling_seconds": labelled, "training": fit, "validation_suboptimality": score, "kept": kept}
         history.append(row)
-        log(f"round {rnd}: {len(demos)} states in {labelled:.0f} s; chosen {chosen}; the best candidate "
+        log(f"round {rnd}: {len(new)} states in {labelled:.0f} s (trained on {len(demos)}); chosen {chosen}; the best candidate "
             f"{gain:.2f} % shorter than LVWS's own on average; validation {score:.2f} % "
             f"({'kept' if kept else 'not kept'}; best {min(best_score, score):.2f} %)")
         if kept:
