@@ -239,6 +239,7 @@ def _improve(args: argparse.Namespace, cfg: Any, own: list[Instance], init: Path
                          temperature=DEFAULT_TEMPERATURE if args.temperature is None else args.temperature,
                          expert_time_limit=args.improve_expert, large=args.large, per_round=args.per_round,
                          states_per_instance=args.states_per_instance, replay=args.replay,
+                         improved_only=args.improved_only,
                          epochs=args.epochs, lr=args.lr,
                          seed=args.seed, processes=args.processes, ray_address=args.ray_address,
                          targets=args.targets, train=cfg.train)
@@ -371,6 +372,8 @@ def _add_train(add: Adder) -> None:
                    help="labelled states per instance, spread over its schedule (0: all)")
     g.add_argument("--replay", action=argparse.BooleanOptionalAction, default=True,
                    help="train each round on the labels of every round so far (default) or on its own only")
+    g.add_argument("--improved-only", action="store_true",
+                   help="label only instances where a candidate beats LVWS's own schedule")
     g.add_argument("--large", type=int, default=0,
                    help="training instances of the mixture at 20-60 robots x 50-200 tasks (no proof needed)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -25,7 +25,8 @@ is written to ``<out>.improve.pt`` (weights, round, history): a run stopped anyw
 resumes from the last finished round (each round's model, kept or not, is
 ``<out>.roundN.pt``). With ``replay`` every round trains on all labels so far; at most
 ``states_per_instance`` states are labelled per instance, spread over its schedule, so
-a large instance weighs as a few small ones.
+a large instance weighs as a few small ones. With ``improved_only``, an instance whose
+best candidate is LVWS's own schedule is not labelled (it would teach what LVWS does).
 """
 
 from __future__ import annotations
@@ -74,6 +75,7 @@ class ImproveConfig:
     per_round: int = 0  # training instances drawn afresh for each round (0: all of them every round)
     states_per_instance: int = 24  # labelled states per instance, spread over its schedule (0: all)
     replay: bool = True  # train on the labels of every round so far, not only this round's
+    improved_only: bool = False  # label only instances whose best candidate is shorter than LVWS's own schedule
     epochs: int = 4  # fine-tuning epochs per round
     lr: float = 5e-4
     seed: int = 0
@@ -176,7 +178,9 @@ def _round_job(args: tuple[Instance, dict[str, Any], dict[str, Any], float, dict
     found = candidates(inst, policy, cfg, np.random.default_rng(seed))
     chosen = choose(found)
     best = {k: min((c.makespan for c in found if c.kind == k), default=math.nan) for k in KINDS}
-    return label(inst, chosen, cfg.targets, cfg.states_per_instance), {**best, "chosen": float(KINDS.index(chosen.kind))}
+    demos = [] if cfg.improved_only and chosen.kind == "lvws" else label(inst, chosen, cfg.targets,
+                                                                          cfg.states_per_instance)
+    return demos, {**best, "chosen": float(KINDS.index(chosen.kind))}
 
 
 def validation_optima(instances: Sequence[Instance], time_limit: float, cache: Path | None,
@@ -256,6 +260,12 @@ def improve(init: str | Path, train_set: Sequence[Instance], val_set: Sequence[I
                                 for st in stats)
         chosen = {k: sum(1 for st in stats if int(st["chosen"]) == i) for i, k in enumerate(KINDS)}
         labelled = time.perf_counter() - t0
+        if not demos:
+            log(f"round {rnd}: no labelled states (no candidate beat LVWS's own schedule); nothing to train")
+            history.append({"round": rnd, "states": 0, "validation_suboptimality": best_score, "kept": False})
+            save_checkpoint(state_path, model, {**meta, "improve_history": history,
+                                                "validation_suboptimality": best_score}, epoch=rnd)
+            continue
         tcfg = TrainConfig(**{**asdict(cfg.train), "model": model.cfg, "epochs": cfg.epochs, "lr": cfg.lr,
                               "seed": cfg.seed + rnd})
         candidate, fit = train(demos, tcfg, model=copy.deepcopy(model), progress=progress, log=log)

@@ -166,3 +166,16 @@ def test_a_recipe_runs_its_stages_in_order(tmp_path, monkeypatch, small_model):
     first = load_checkpoint(tmp_path / "final.stage1.pt")[1]
     final = load_checkpoint(out)[1]
     assert first["init"] == str(init) and final["init"] == str(tmp_path / "final.stage1.pt")
+
+
+def test_with_improved_only_a_round_without_a_better_candidate_labels_and_trains_nothing(tmp_path, small_model):
+    from lvws_ros.learning.improvement import ImproveConfig, improve
+
+    init = tmp_path / "tiny.pt"
+    save_checkpoint(init, small_model, {"kind": "lvws", "idle_bias": NO_VOLUNTARY_WAIT})
+    insts = [dataset_instance(DATASETS["IV"], k, seed=4) for k in range(5)]
+    cfg = ImproveConfig(rounds=1, samples=3, temperature=0.0, improved_only=True, processes=1)  # samples = LVWS's
+    model, meta = improve(init, insts[:3], insts[3:], cfg, tmp_path / "out.pt", progress=False, log=lambda s: None)
+    assert meta["improve_history"][1]["states"] == 0 and not meta["improve_history"][1]["kept"]
+    for a, b in zip(model.state_dict().values(), small_model.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
