@@ -100,7 +100,7 @@ def subteam_heavy_instance(rng: np.random.Generator, num_robots: int, num_tasks:
     """A fleet-style instance where most tasks need 2-6 robots: robot payloads uniform in
     1..10, task payloads Poisson(16) clipped to 1..60 (and to the team's payload), three
     capabilities held by about half of the robots each, the same random DAG as the
-    paper's datasets. Used by the scale benchmarks (issue "subteams at scale")."""
+    paper's datasets. Used by the scale benchmarks."""
     k = num_capabilities
     robot_caps = (rng.random((num_robots, k)) < 0.5).astype(int)
     robot_caps[~robot_caps.any(axis=1), 0] = 1

@@ -14,7 +14,7 @@ Model (per remaining task j, start S_j):
     travel(to_i, from_j) (sequence-dependent set-up times, rounded up to ticks). Proofs
     are about this model over minimal subteams: rule 7 also accepts schedules where robots
     set out before a task is ready, and a superset subteam (a rider on a transport) can
-    pay with travel; neither is modelled (issue #15);
+    pay with travel; neither is modelled;
   * redundant cumulatives (robots in use, payload in use, holders of each capability in
     use), start windows from longest paths before/after each task, and a hint from the
     best heuristic schedule, which also bounds the horizon.
