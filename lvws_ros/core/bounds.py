@@ -1,0 +1,108 @@
+"""Lower bounds on the makespan of an instance: what no schedule can beat.
+
+Every schedule comes with a bound, so a user sees how far it can be from optimal at any
+size (the exact solver proves optima only on small cells):
+
+* **critical path with the least travel**: a task starts no earlier than the end of its
+  prerequisites, nor before a subteam covering it (Eqs. 10-11) can first be at its site,
+  each robot setting out from where it starts at time 0 over the shortest route between
+  sites at its speed (so the bound holds whatever order a robot visits sites in); the
+  longest such chain, each task's duration and the longest duration path after it added;
+* **workload over capacity**: the robot-seconds every task needs (at least as many robots
+  as carry its payload, at least one) over the team's size; for each capability, the
+  seconds of the tasks needing it over its holders; the payload-seconds over the team's
+  payload.
+
+Both are O(N M K + M log M + S^3) (S: sites). With travel, times are from time 0 and
+robots at their start sites; the executor's model (travel, then the task) is what they
+bound.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.subteams import TOLERANCE, FloatArray, earliest_cover
+
+__all__ = ["Bounds", "gap", "lower_bounds"]
+
+
+@dataclass(frozen=True)
+class Bounds:
+    critical_path: float  # with the least travel
+    workload: float  # the largest of the workload ratios
+
+    @property
+    def best(self) -> float:
+        return max(self.critical_path, self.workload)
+
+
+def _shortest_routes(distance: FloatArray) -> FloatArray:
+    """All-pairs shortest route lengths between sites (Floyd-Warshall): a robot may visit
+    sites in any order, so the direct distance bounds nothing when a detour is shorter."""
+    d = np.array(distance, dtype=np.float64)
+    np.fill_diagonal(d, 0.0)
+    for k in range(len(d)):
+        d = np.minimum(d, d[:, k:k + 1] + d[k:k + 1, :])
+    return d
+
+
+def _release(inst: Instance) -> FloatArray:
+    """(M,) the earliest a covering subteam can be at each task's meeting site (0 without travel)."""
+    tr = inst.travel
+    m = inst.num_tasks
+    if tr is None or m == 0:
+        return np.zeros(m)
+    routes = _shortest_routes(tr.distance)
+    site = np.asarray(tr.robot_site, dtype=np.int64)
+    speed = np.asarray(tr.robot_speed, dtype=np.float64)
+    meet = np.asarray(tr.task_from, dtype=np.int64)
+    moves = meet != np.asarray(tr.task_to, dtype=np.int64)
+    fixed = speed <= 0
+    with np.errstate(divide="ignore"):
+        times = routes[np.ix_(site, meet)] / np.where(fixed, 1.0, speed)[:, None]
+    times[fixed[:, None] & (site[:, None] != meet[None, :])] = np.inf  # a fixed robot only at its site
+    times[fixed[:, None] & moves[None, :]] = np.inf  # and never on a task that moves its team
+    out = earliest_cover(times, inst.robot_caps, inst.robot_payload, inst.task_caps, inst.task_payload)
+    return np.where(np.isfinite(out), out, 0.0)  # never covered from time 0: no bound from it
+
+
+def _critical_path(inst: Instance) -> float:
+    if inst.num_tasks == 0:
+        return 0.0
+    head = _release(inst)  # earliest start of each task
+    for j in inst.topological_order:
+        for p in inst.prerequisites[j]:
+            head[j] = max(head[j], head[p] + inst.durations[p])
+    return float((head + inst.critical_tail).max())
+
+
+def _workload(inst: Instance) -> float:
+    n, m = inst.num_robots, inst.num_tasks
+    if m == 0 or n == 0:
+        return 0.0
+    durations = inst.durations
+    ordered = np.sort(inst.robot_payload)[::-1].cumsum()
+    fewest = np.minimum(np.searchsorted(ordered, inst.task_payload - TOLERANCE) + 1, n)  # robots for the payload
+    ratios = [float((durations * np.maximum(fewest, 1)).sum()) / n]
+    holders = inst.robot_caps.sum(axis=0)
+    for k in range(inst.task_caps.shape[1]):
+        if holders[k]:
+            ratios.append(float(durations[inst.task_caps[:, k]].sum()) / float(holders[k]))
+    team = float(inst.robot_payload.sum())
+    if team > 0:
+        ratios.append(float((inst.task_payload * durations).sum()) / team)
+    return max(ratios)
+
+
+def lower_bounds(inst: Instance) -> Bounds:
+    """The critical-path and workload bounds of ``inst`` (module docstring)."""
+    return Bounds(_critical_path(inst), _workload(inst))
+
+
+def gap(makespan: float, bound: float) -> float:
+    """(makespan - bound) / makespan: how far above optimal a schedule can be at most."""
+    return max(0.0, (makespan - bound) / makespan) if makespan > 0 else 0.0
