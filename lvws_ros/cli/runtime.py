@@ -26,7 +26,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     cfg = load_cell_config(args.config or case_study_config())
     if args.compare:
         return _compare_travel(cfg, args)
-    sim = CellSim(cfg)
+    sim = CellSim(cfg, noise=args.noise, noise_seed=args.seed)
+    if args.noise:
+        print(f"duration noise: each task takes its duration x a factor in [{1 - args.noise:g}, {1 + args.noise:g}] "
+              f"(seed {args.seed})", file=sys.stderr)
     events = load_events(args.events) if args.events else None
     options = _options(args, args.policy)
     try:
@@ -85,8 +88,9 @@ def _compare_travel(cfg: Any, args: argparse.Namespace) -> int:
         options = _options(args, name)
         return lambda: make_policy(name, seed=args.seed, **options)
 
-    rows = compare_travel(cfg, [(n, maker(n)) for n in names])
-    print(f"{cfg.name}: makespans in seconds of sim time (seed {args.seed})")
+    rows = compare_travel(cfg, [(n, maker(n)) for n in names], noise=args.noise, noise_seed=args.seed)
+    noisy = f", durations x U[{1 - args.noise:g}, {1 + args.noise:g}]" if args.noise else ""
+    print(f"{cfg.name}: makespans in seconds of sim time (seed {args.seed}{noisy})")
     print("| policy | plan with travel | executed | executed - plan | executed, scheduler told no travel |")
     print("|---|---|---|---|---|")
     for r in rows:
@@ -180,6 +184,9 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--beam-width", type=int, default=None,
                    help="lvws_beam: partial schedules kept at each depth (default: its DEFAULT_WIDTH)")
     p.add_argument("--config", default=None, help="assembly-cell YAML (default: config/assembly_cell.yaml)")
+    p.add_argument("--noise", type=float, default=0.0,
+                   help="duration noise: each task takes its duration x a factor drawn in [1 - NOISE, 1 + NOISE] "
+                        "from --seed and its id (0, default: exact durations; below 1)")
     p.add_argument("--out", help="write the executed schedule (lvws-schedule/1) here")
     p.add_argument("--gif", help="write an animated GIF of the run here")
     p.add_argument("--frames", help="write a PNG per frame into this folder")

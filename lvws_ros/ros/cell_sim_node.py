@@ -6,7 +6,10 @@ second for poses), ``/clock`` (sim time), ``visualization_msgs/MarkerArray`` on
 times faster than wall time; with ``sync`` (default) the world pauses at a decision
 step until the scheduler answers it (or ``sync_timeout`` wall seconds pass), so runs do
 not depend on the machine's speed. When every task is done it prints the makespan,
-writes ``summary`` (JSON) and the ``gif``, and exits 0.
+writes ``summary`` (JSON) and the ``gif``, and exits 0. With ``noise`` (in [0, 1)) each
+task takes its duration times a factor in [1 - noise, 1 + noise] drawn from
+``noise_seed`` and the task's id (:meth:`~lvws_ros.sim.world.CellSim.duration_factor`):
+the world departs from every plan as a real cell does.
 
 The world changes while it runs (the dynamic protocol of the README): scripted events
 (parameter ``events``, :mod:`lvws_ros.sim.events`) and the services ``submit_tasks``
@@ -112,7 +115,9 @@ class CellSimNode(Node):
         self.stuck_since: float | None = None  # wall time a service call made the run impossible
         if self.rate <= 0:
             raise LvwsError(f"parameter rate must be > 0, got {self.rate}")
-        self.sim = CellSim(load_cell_config(cfg_path or case_study_config()))
+        noise = float(self.declare_parameter("noise", 0.0).value)
+        noise_seed = int(self.declare_parameter("noise_seed", 0).value)
+        self.sim = CellSim(load_cell_config(cfg_path or case_study_config()), noise=noise, noise_seed=noise_seed)
         self.frame = self.sim.cfg.frame_id
         self.team_pub = self.create_publisher(TeamState, topics.TEAM_TOPIC, topics.TEAM_QOS)
         self.graph_pub = self.create_publisher(TaskGraph, topics.GRAPH_TOPIC, topics.GRAPH_QOS)

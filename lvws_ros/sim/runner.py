@@ -72,16 +72,18 @@ class TravelComparison:
         return (self.executed - self.plan) / self.plan if self.plan > 0 else 0.0
 
 
-def compare_travel(cfg: CellConfig, policies: Sequence[tuple[str, Callable[[], Policy]]]) -> list[TravelComparison]:
+def compare_travel(cfg: CellConfig, policies: Sequence[tuple[str, Callable[[], Policy]]], noise: float = 0.0,
+                   noise_seed: int = 0) -> list[TravelComparison]:
     """Each (name, policy maker) planned in the executor and run twice in the simulator,
-    told the travel and not (``CellSim.share_travel``); the cell must plan with travel."""
+    told the travel and not (``CellSim.share_travel``); the cell must plan with travel.
+    With ``noise``, the world's durations depart from the plan's (``CellSim``)."""
     rows = []
     for name, make in policies:
-        aware = CellSim(cfg)
+        aware = CellSim(cfg, noise=noise, noise_seed=noise_seed)
         if aware.inst.travel is None:
             raise PolicyError(f"{cfg.name}: the cell does not plan with travel (plan_travel: false)")
         plan = simulate(aware.inst, make()).schedule.makespan
         executed = run_offline(aware, make())[0].makespan
-        blind = run_offline(CellSim(cfg, share_travel=False), make())[0].makespan
+        blind = run_offline(CellSim(cfg, share_travel=False, noise=noise, noise_seed=noise_seed), make())[0].makespan
         rows.append(TravelComparison(name, plan, executed, blind))
     return rows

@@ -32,6 +32,7 @@ offline runner and the tests drive it.
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -148,7 +149,11 @@ class Event:
 class CellSim:
     """The case-study world. ``assign`` starts tasks, ``step`` advances sim time by dt."""
 
-    def __init__(self, cfg: CellConfig, share_travel: bool = True) -> None:
+    def __init__(self, cfg: CellConfig, share_travel: bool = True, noise: float = 0.0, noise_seed: int = 0) -> None:
+        if not 0.0 <= noise < 1.0:
+            raise ConfigError(f"duration noise must be in [0, 1), got {noise!r}")
+        # duration noise: each task takes its duration times a seeded factor in [1 - noise, 1 + noise]
+        self.noise, self.noise_seed = float(noise), int(noise_seed)
         self.cfg = cfg
         # False: the snapshots leave the travel out (a travel-blind scheduler in the same
         # world, for comparison); the world still moves by the plan's travel
@@ -302,8 +307,17 @@ class CellSim:
                 job.due = {r: self.time + self._travel_time(r, spec.source) for r in team}
                 self.start[task_id] = max(job.due.values())
         else:
-            job = _Job(spec, team, "work", timer=spec.duration)
+            job = _Job(spec, team, "work", timer=spec.duration * self.duration_factor(task_id))
         self.jobs[task_id] = job
+
+    def duration_factor(self, task_id: str) -> float:
+        """How much longer (or shorter) than its duration task ``task_id`` takes here: 1
+        without noise, else 1 + noise x U(-1, 1) drawn from the noise seed and the task's
+        id (the same factor for the same task in every run; tasks added later get theirs)."""
+        if self.noise == 0.0:
+            return 1.0
+        u = np.random.default_rng([self.noise_seed, zlib.crc32(task_id.encode())]).random()
+        return 1.0 + self.noise * (2.0 * u - 1.0)
 
     def _travel_time(self, rid: str, site: str) -> float:
         """Seconds the plan gives robot ``rid`` from where it is to ``site`` (plan_travel):
@@ -487,7 +501,7 @@ class CellSim:
                 arrived = [self._drive(r, job.targets[r], self._pace(r, job), dt)
                            and self.time >= job.due.get(r, 0.0) - 1e-9 for r in job.team]
                 if all(arrived):
-                    job.phase, job.timer = "load", self.cfg.handling_time
+                    job.phase, job.timer = "load", self.cfg.handling_time * self.duration_factor(tid)
                     self.object_cell[spec.object] = None
                     if self.cfg.plan_travel:
                         self.start[tid] = self.time  # the task starts when the last member is there
@@ -504,10 +518,11 @@ class CellSim:
                 speed = min(self.robot_spec[r].speed for r in job.team)
                 if self.cfg.plan_travel:  # the plan's duration: carried at nominal_speed
                     speed = min(speed, self.cfg.nominal_speed)
+                speed /= self.duration_factor(tid)  # a transport's noise: slower or faster carrying
                 arrived = [self._drive(r, job.targets[r], speed, dt) for r in job.team]
                 self.bodies[spec.object].velocity = self.bodies[job.team[0]].velocity
                 if all(arrived):
-                    job.phase, job.timer = "unload", self.cfg.handling_time
+                    job.phase, job.timer = "unload", self.cfg.handling_time * self.duration_factor(tid)
             elif job.phase == "unload":
                 job.timer -= dt
                 if job.timer <= 1e-9:

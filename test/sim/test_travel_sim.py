@@ -1,4 +1,4 @@
-"""The case study planned with travel (issue #15): config/assembly_cell.yaml gives a
+"""The case study planned with travel: config/assembly_cell.yaml gives a
 travel-aware instance, the simulator executes a plan on time, the executed schedule is
 valid by the travel rules, and a cell without ``plan_travel`` is the paper's case study,
 unchanged."""
