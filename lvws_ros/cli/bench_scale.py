@@ -54,9 +54,12 @@ def one_run(policy: str, family: str, n: int, m: int, seed: int) -> dict[str, An
     t0 = time.perf_counter()
     res = simulate(inst, pol)
     seconds = time.perf_counter() - t0
+    from lvws_ros.core.bounds import gap, lower_bounds
+
+    bound = lower_bounds(inst).best
     return {"seconds": seconds, "decisions": res.schedule.decisions, "makespan": res.schedule.makespan,
-            "valid": not check_schedule(inst, res.schedule),
-            "peak_mib": _peak_mib()}
+            "valid": not check_schedule(inst, res.schedule), "bound": bound,
+            "gap": gap(res.schedule.makespan, bound), "peak_mib": _peak_mib()}
 
 
 def _peak_mib() -> float:
@@ -83,17 +86,20 @@ def run_in_child(policy: str, family: str, n: int, m: int, seed: int, limit: flo
 def bench_whole_schedules(seed: int, limit: float) -> None:
     print(f"\n## Whole schedules (seed {seed}; each run in its own process, limit {limit:g} s; peak = max RSS)")
     print(f"lvws_rollout runs with a budget of {ROLLOUT_BUDGET_MS:g} ms per decision step.")
-    print("| family | N x M | policy | seconds | decisions | makespan | valid | peak MiB |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("Gap: (makespan - lower bound) / makespan, the bound of lvws_ros/core/bounds.py (critical path with the "
+          "least travel, workload over capacity): the most the schedule can be above the optimum.")
+    print("| family | N x M | policy | seconds | decisions | makespan | lower bound | gap | valid | peak MiB |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for family in (*FAMILIES, *TRAVEL_FAMILIES):
         for n, m in ((100, 500), (1000, 5000)):
             for policy in POLICIES:
                 r = run_in_child(policy, family, n, m, seed, limit)
                 if "error" in r:
-                    print(f"| {family} | {n} x {m} | {policy} | {r['error']} | | | | |", flush=True)
+                    print(f"| {family} | {n} x {m} | {policy} | {r['error']} | | | | | | |", flush=True)
                 else:
                     print(f"| {family} | {n} x {m} | {policy} | {r['seconds']:.2f} | {r['decisions']} | "
-                          f"{r['makespan']:g} | {'yes' if r['valid'] else 'NO'} | {r['peak_mib']:.0f} |", flush=True)
+                          f"{r['makespan']:g} | {r['bound']:g} | {100 * r['gap']:.1f} % | "
+                          f"{'yes' if r['valid'] else 'NO'} | {r['peak_mib']:.0f} |", flush=True)
 
 
 def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: bool = True) -> list[float]:
