@@ -13,14 +13,14 @@ from lvws_ros.errors import PolicyError
 
 __all__ = ["LEARNED_POLICIES", "POLICY_NAMES", "make_policy"]
 
-POLICY_NAMES = ("lvws", "lvws_sample", "lvws_rollout", "lvws_beam", "dbgm", "grp", "rand", "rand_subteam", "exact")
-LEARNED_POLICIES = ("lvws", "lvws_sample", "lvws_rollout", "lvws_beam", "dbgm")  # take a model_path
+POLICY_NAMES = ("auto", "lvws", "lvws_sample", "lvws_rollout", "lvws_beam", "dbgm", "grp", "rand", "rand_subteam", "exact")
+LEARNED_POLICIES = ("auto", "lvws", "lvws_sample", "lvws_rollout", "lvws_beam", "dbgm")  # take a model_path
 
 
 def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     """A policy by its name. ``options``: ``time_limit``/``workers`` for ``exact``,
     ``model_path`` for the learned ones (empty or None: the shipped checkpoint),
-    ``budget_ms`` for ``lvws_rollout`` and ``lvws_sample`` (per decision step) and
+    ``budget_ms`` for ``auto``, ``lvws_rollout`` and ``lvws_sample`` (per decision step) and
     ``lvws_beam`` (per search; None: no budget), ``width`` for ``lvws_beam`` (None: its
     default), ``matching`` for ``lvws`` (greedy | exact; None: greedy), ``samples`` and
     ``temperature`` for ``lvws_sample`` (None: its defaults; its
@@ -45,6 +45,11 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
             "lvws": LVWSPolicy, "dbgm": DBGMPolicy, "lvws_rollout": LVWSRolloutPolicy}
         if name == "lvws_rollout":
             return LVWSRolloutPolicy(model_path=model_path, budget_ms=options.get("budget_ms"))
+        if name == "auto":
+            from lvws_ros.learning.auto import DEFAULT_BUDGET_MS, AutoPolicy
+
+            budget = options.get("budget_ms")
+            return AutoPolicy(model_path=model_path, seed=seed, budget_ms=DEFAULT_BUDGET_MS if budget is None else budget)
         if name == "lvws_sample":
             from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, LVWSSamplePolicy
 

@@ -81,6 +81,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
               "was spent before any schedule was found)", file=sys.stderr)
     if args.policy == "lvws_sample":
         print(f"lvws_sample: seed {args.seed}", file=sys.stderr)
+    if args.policy == "auto":
+        improved = getattr(policy, "improved", {})
+        print(f"auto: quick plan {getattr(policy, 'quick_makespan', float('nan')):g}, improved by CP-SAT "
+              f"{improved.get('exact', 0)} and by sampling {improved.get('sample', 0)} times; "
+              f"{'proven optimal' if getattr(policy, 'proven', False) else 'not proven optimal'}; seed {args.seed}",
+              file=sys.stderr)
     if args.out:
         save_schedule(result.schedule, args.out)
     sys.stdout.write(dumps(schedule_to_dict(result.schedule)))
@@ -280,8 +286,8 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--workers", type=int, default=8, help="exact policy: CP-SAT workers")
     p.add_argument("--model", default=None, help="lvws/dbgm policy: checkpoint (default: the shipped one)")
     p.add_argument("--budget-ms", type=float, default=None,
-                   help="lvws_rollout, lvws_sample: time budget per decision step, lvws_beam: per search [ms] "
-                        "(default: none)")
+                   help="auto, lvws_rollout, lvws_sample: time budget per decision step, lvws_beam: per search [ms] "
+                        "(default: none; auto: 1000)")
     p.add_argument("--beam-width", type=int, default=None,
                    help="lvws_beam: partial schedules kept at each depth (default: its DEFAULT_WIDTH)")
     p.add_argument("--samples", type=int, default=None,

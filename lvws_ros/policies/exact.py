@@ -514,10 +514,11 @@ class ExactPolicy:
 
     name = "exact"
 
-    def __init__(self, time_limit: float = 60.0, workers: int = 8, seed: int = 0) -> None:
+    def __init__(self, time_limit: float = 60.0, workers: int = 8, seed: int = 0, hint: Schedule | None = None) -> None:
         self.time_limit = time_limit
         self.workers = workers
         self.seed = seed
+        self.hint = hint  # a schedule to warm-start the first solve from (None: the heuristic's)
         self.result: ExpertResult | None = None
         self._plan: dict[int, Assignment] = {}
         self._leave: dict[str, float] = {}  # when each planned subteam sets out
@@ -548,7 +549,9 @@ class ExactPolicy:
         if now is None or self._missed(state, now):
             self.result = None  # the world deviated from the plan (online use): re-solve from here
         if self.result is None:
-            self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed)
+            self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed,
+                                      hint=self.hint)
+            self.hint = None
             assert self.result.schedule is not None
             self._plan = {inst.task_index[a.task]: a for a in self.result.schedule.assignments}
             self._leave = departures(inst, self.result.schedule, state)  # = starts without travel

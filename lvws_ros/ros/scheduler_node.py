@@ -81,6 +81,7 @@ class Param:
 
 BEAM_BUDGET_MS = 1000.0  # lvws_beam's search budget when decision_budget_ms is 0
 SAMPLE_BUDGET_MS = 50.0  # lvws_sample's budget per decision when decision_budget_ms is 0
+AUTO_BUDGET_MS = 1000.0  # auto's budget per decision when decision_budget_ms is 0
 MAX_BEAM_WIDTH = 1_000_000  # the beam_width parameter's range (a search that wide never ends within a budget)
 MAX_SAMPLES = 100_000  # the samples parameter's range
 
@@ -90,9 +91,10 @@ PARAMETERS: dict[str, Param] = {
                                          "'' for none"),
     "model_path": Param(str, "", "checkpoint of a learned policy; '' for the shipped one"),
     "seed": Param(int, 0, "seed of the random policies", 0, 2**31 - 1),
-    "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (lvws_sample, "
+    "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (auto, lvws_sample, "
                                             "lvws_rollout, lvws_beam, exact) in ms; 0: their own limits "
-                                            f"(lvws_beam: {BEAM_BUDGET_MS:g} ms, lvws_sample: {SAMPLE_BUDGET_MS:g} ms)",
+                                            f"(auto: {AUTO_BUDGET_MS:g} ms, lvws_beam: {BEAM_BUDGET_MS:g} ms, "
+                                            f"lvws_sample: {SAMPLE_BUDGET_MS:g} ms)",
                                 0.0, 3.6e6),
     "samples": Param(int, 0, "lvws_sample: schedules sampled in lockstep per round; 0: the sampler's default "
                              "(lvws_ros/learning/sampling.py)", 0, MAX_SAMPLES),
@@ -175,6 +177,8 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
         options.update(beam)
     if name == "lvws_sample":
         options.update(sample)
+    if name == "auto":
+        options["budget_ms"] = budget if budget > 0 else AUTO_BUDGET_MS
     if name == "exact" and budget > 0:
         options["time_limit"] = budget / 1000
     fallback = values["fallback_policy"]

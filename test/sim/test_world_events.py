@@ -107,7 +107,7 @@ def test_tasks_added_and_cancelled(sim):
     assert "t04" in sim.status
 
 
-@pytest.mark.parametrize("policy", ["grp", "lvws"])
+@pytest.mark.parametrize("policy", ["grp", "lvws", "lvws_sample", "auto"])
 def test_scripted_events_run_to_a_valid_schedule_of_the_final_tasks(sim, policy, tmp_path: Path):
     path = tmp_path / "events.yaml"
     path.write_text(EVENTS)

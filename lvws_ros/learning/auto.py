@@ -1,0 +1,159 @@
+"""The ``auto`` policy: the best schedule it can find within the decision budget.
+
+A user should not need to know which policy suits which cell. At a decision step with no
+plan to follow, ``auto``
+
+1. makes the quick plans: GRP's and LVWS's whole schedules from the state (each a
+   finish, under the budget), and takes the shorter;
+2. improves it while the budget lasts: CP-SAT from the state, warm-started from the
+   incumbent (for a cell of at most ``exact_tasks`` tasks still to do; a proof of
+   optimality ends the search for the run), then LVWS sampling
+   (:func:`~lvws_ros.learning.sampling.sample_schedules`) in rounds sized to the time left;
+3. follows the best plan (:class:`~lvws_ros.learning.search.FollowedPlan`, with the drift
+   rule of :data:`~lvws_ros.core.executor.PLAN_DRIFT`); when the world departs from it (a
+   task late or early, a robot lost or back, tasks added or cancelled), it plans again
+   from the state it is in, the rest of the old plan no longer valid.
+
+While it follows a plan not proven optimal, each later step spends its budget on the
+same improvement from its own state, replacing the plan only by a shorter one: a plan
+never gets worse. With a budget of 0 it decides as its quick plan does; when not even a
+quick plan finishes within the budget (fleet scale), it takes GRP's decision for the
+step and counts it in ``fallbacks``. With a budget of 0 the quick plans are made however
+long they take, and nothing more. Each step's compute stays within the budget plus
+at most one decision of LVWS or GRP and CP-SAT's overshoot of its time limit.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lvws_ros.core.executor import (
+    Decision,
+    Policy,
+    SimulationResult,
+    State,
+    TaskStatus,
+    schedule_from_state,
+    simulate,
+)
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.schedule import Schedule
+from lvws_ros.core.subteams import TOLERANCE
+from lvws_ros.errors import ExpertError, PolicyError
+from lvws_ros.learning.policies import OutOfTime, Until
+from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, LVWSSamplePolicy, sample_schedules
+from lvws_ros.learning.search import FollowedPlan, PlannedStep
+from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+DEFAULT_BUDGET_MS = 1000.0
+EXACT_TASKS = 60  # CP-SAT improves plans of cells with at most this many tasks still to do
+EXACT_SHARE = 0.6  # of the time left that CP-SAT may take (the rest: sampling)
+
+__all__ = ["DEFAULT_BUDGET_MS", "EXACT_TASKS", "AutoPolicy"]
+
+
+class AutoPolicy:
+    """The best plan found within ``budget_ms`` per decision step (module docstring)."""
+
+    name = "auto"
+
+    def __init__(self, model_path: str | Path | None = None, budget_ms: float = DEFAULT_BUDGET_MS, seed: int = 0,
+                 exact_tasks: int = EXACT_TASKS, samples: int = DEFAULT_SAMPLES,
+                 temperature: float = DEFAULT_TEMPERATURE, workers: int = 8) -> None:
+        if not math.isfinite(budget_ms) or budget_ms < 0:
+            raise PolicyError(f"auto: the budget must be a finite number of ms >= 0, got {budget_ms}")
+        self.sampler = LVWSSamplePolicy(model_path=model_path, samples=samples, temperature=temperature, seed=seed)
+        self.grp = GreedyPayloadPolicy()
+        self.budget_ms, self.exact_tasks, self.workers, self.seed = budget_ms, exact_tasks, workers, seed
+        self.plan = FollowedPlan()
+        self.proven = False  # the plan followed is a proven optimum (nothing left to improve)
+        self.quick_makespan = math.nan  # of the latest quick plan
+        self.rng = np.random.default_rng(seed)
+        self.plans = self.fallbacks = 0  # plans made afresh; steps decided by GRP alone (no plan in the budget)
+        self.improved = {"exact": 0, "sample": 0}  # times each improver shortened the plan
+        self._schedule: Schedule | None = None  # the plan's whole schedule (CP-SAT's warm start)
+
+    def reset(self, instance: Instance) -> None:
+        self.sampler.reset(instance)
+        self.sampler.base.decide(State.initial(instance))  # the network's first pass (slow) before any budget
+        self.grp.reset(instance)
+        self.plan.clear()
+        self.proven = False
+        self.quick_makespan = math.nan
+        self.rng = np.random.default_rng(self.seed)
+        self.plans = self.fallbacks = 0
+        self.improved = {"exact": 0, "sample": 0}
+
+    @property
+    def planned_makespan(self) -> float:
+        return self.plan.makespan
+
+    def _finish(self, policy: Policy, state: State, deadline: float | None) -> SimulationResult | None:
+        """``policy``'s whole schedule from ``state`` (None when it stalls or the deadline passes)."""
+        try:
+            return simulate(state.instance, policy if deadline is None else Until(policy, deadline), state=state)
+        except (OutOfTime, PolicyError):
+            return None
+
+    def _offer_run(self, state: State, res: SimulationResult) -> bool:
+        steps = [PlannedStep(r.time, r.free_robots, r.ready_tasks, r.decision) for r in res.steps]
+        return self._offer(state, float(res.schedule.makespan), steps, res.schedule)
+
+    def _offer(self, state: State, makespan: float, steps: list[PlannedStep], schedule: Schedule) -> bool:
+        """Follow ``steps`` from ``state`` when shorter than the plan (True then)."""
+        if steps and makespan < (self.plan.makespan if self.plan.steps else math.inf) - TOLERANCE:
+            self.plan.replace(state.instance, steps, makespan)
+            self._schedule = schedule
+            return True
+        return False
+
+    def _exact(self, state: State, deadline: float) -> None:
+        """CP-SAT from ``state``, warm-started from the plan, within the time left."""
+        from lvws_ros.policies.exact import ExactPolicy
+
+        todo = int(np.sum((state.task_status == TaskStatus.QUEUED) | (state.task_status == TaskStatus.READY)))
+        left = deadline - time.perf_counter()
+        if todo > self.exact_tasks or left <= 0.01:
+            return
+        hint = self._schedule if self.plan.steps else None  # warm start: the plan followed
+        expert = ExactPolicy(time_limit=left * EXACT_SHARE, workers=self.workers, seed=self.seed, hint=hint)
+        try:
+            res = simulate(state.instance, expert, state=state)
+        except (ExpertError, PolicyError):
+            return
+        if expert.result is None:
+            return
+        if self._offer_run(state, res):
+            self.improved["exact"] += 1
+        if expert.result.proven and abs(float(res.schedule.makespan) - self.plan.makespan) <= TOLERANCE:
+            self.proven = True
+
+    def decide(self, state: State) -> Decision:
+        deadline = time.perf_counter() + self.budget_ms / 1000
+        following = self.plan.follows(state, self.name)
+        if following and self.proven:
+            return self.plan.pop()
+        if not following:
+            self.plan.clear()
+            self.proven = False
+            self.plans += 1
+            limit = None if self.budget_ms == 0 else deadline  # budget 0: the quick plan alone, however long
+            for res in (self._finish(self.grp, state, limit), self._finish(self.sampler.base, state, limit)):
+                if res is not None:
+                    self._offer_run(state, res)
+            self.quick_makespan = self.plan.makespan if self.plan.steps else math.nan
+        if time.perf_counter() < deadline:
+            self._exact(state, deadline)
+        while not self.proven and self.sampler.temperature > 0 and time.perf_counter() < deadline:
+            for s in sample_schedules(self.sampler.base, state, self.sampler.samples, self.sampler.temperature,
+                                      self.rng, deadline=deadline):
+                if self._offer(state, s.makespan, s.steps, schedule_from_state(s.final, self.name)):
+                    self.improved["sample"] += 1
+        if not self.plan.steps:
+            self.fallbacks += 1
+            return self.grp.decide(state)
+        return self.plan.pop()

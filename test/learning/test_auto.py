@@ -1,0 +1,75 @@
+"""The ``auto`` policy: never worse than its quick plan (the shorter of GRP's and LVWS's
+schedules), the quick plan alone with a budget of 0, the proven optimum on a small cell
+within a second or two, valid with travel, and replanning when the world departs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lvws_ros.core.datasets import DATASETS, dataset_instance, random_instance
+from lvws_ros.core.executor import check_decision, simulate
+from lvws_ros.core.schedule import check_schedule
+from lvws_ros.errors import PolicyError
+from lvws_ros.learning.auto import AutoPolicy
+from lvws_ros.policies.baselines import GreedyPayloadPolicy
+from lvws_ros.policies.exact import solve_exact
+from lvws_ros.registry import make_policy
+
+
+def _instances():
+    yield from (dataset_instance(DATASETS["IV"], k, seed=13) for k in range(2))  # travel
+    yield from (dataset_instance(DATASETS["I"], k, seed=13) for k in range(2))
+    yield random_instance(np.random.default_rng(2), 4, 9, "r")
+
+
+def _quick(inst):
+    return min(simulate(inst, GreedyPayloadPolicy()).schedule.makespan,
+               simulate(inst, make_policy("lvws")).schedule.makespan)
+
+
+def test_auto_is_valid_and_never_worse_than_its_quick_plan():
+    for inst in _instances():
+        auto = AutoPolicy()
+        sched = simulate(inst, auto).schedule
+        assert check_schedule(inst, sched) == [], inst.name
+        assert sched.makespan <= _quick(inst) + 1e-9, inst.name
+        assert auto.plans == 1 and auto.fallbacks == 0, inst.name  # the executor follows the plan
+        assert auto.quick_makespan == pytest.approx(_quick(inst))
+
+
+def test_with_a_budget_of_zero_auto_decides_as_its_quick_plan_does():
+    for inst in _instances():
+        sched = simulate(inst, AutoPolicy(budget_ms=0.0)).schedule
+        assert sched.makespan == pytest.approx(_quick(inst)), inst.name
+
+
+def test_auto_reaches_the_proven_optimum_of_a_small_cell():
+    inst = dataset_instance(DATASETS["I"], 4, seed=13)
+    opt = solve_exact(inst, workers=8, time_limit=30)
+    assert opt.proven
+    auto = AutoPolicy(budget_ms=3000.0)
+    sched = simulate(inst, auto).schedule
+    assert sched.makespan == pytest.approx(opt.makespan)
+    assert auto.proven
+
+
+def test_auto_plans_again_when_the_world_departs_from_its_plan():
+    inst = dataset_instance(DATASETS["IV"], 1, seed=13)
+    auto = AutoPolicy()
+    steps = simulate(inst, make_policy("lvws"), record_states=True).steps
+    auto.reset(inst)
+    first = steps[0].state
+    assert first is not None
+    auto.decide(first)
+    late = next(s.state for s in steps[1:] if s.state is not None and s.free_robots and s.ready_tasks).copy()
+    late.time += 5.0  # a step the plan did not expect (the world ran late, beyond PLAN_DRIFT)
+    late.refresh()
+    check_decision(late, auto.decide(late), auto.name)
+    assert auto.plans == 2
+
+
+def test_a_negative_budget_is_refused_and_the_registry_makes_auto():
+    with pytest.raises(PolicyError, match="auto"):
+        AutoPolicy(budget_ms=-1.0)
+    assert isinstance(make_policy("auto", budget_ms=5.0), AutoPolicy)
