@@ -47,9 +47,12 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
             return LVWSRolloutPolicy(model_path=model_path, budget_ms=options.get("budget_ms"))
         if name == "auto":
             from lvws_ros.learning.auto import DEFAULT_BUDGET_MS, AutoPolicy
+            from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE
 
-            budget = options.get("budget_ms")
-            return AutoPolicy(model_path=model_path, seed=seed, budget_ms=DEFAULT_BUDGET_MS if budget is None else budget)
+            budget, samples, temperature = options.get("budget_ms"), options.get("samples"), options.get("temperature")
+            return AutoPolicy(model_path=model_path, seed=seed, budget_ms=DEFAULT_BUDGET_MS if budget is None else budget,
+                              samples=DEFAULT_SAMPLES if samples is None else samples,
+                              temperature=DEFAULT_TEMPERATURE if temperature is None else temperature)
         if name == "lvws_sample":
             from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, LVWSSamplePolicy
 

@@ -59,6 +59,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
         options = {"model_path": args.model, "budget_ms": args.budget_ms, "width": args.beam_width,
                    "samples": args.samples, "temperature": args.temperature, "matching": args.matching}
     from lvws_ros.core.bounds import gap, lower_bounds
+    from lvws_ros.core.subteams import TOLERANCE
+    from lvws_ros.policies.exact import proves_executor_bound
 
     policy = make_policy(args.policy, seed=args.seed, **options)
     result = simulate(inst, policy)
@@ -69,9 +71,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
         result.schedule.extra.update({"status": expert.status})
         print(f"exact: {expert.status}, makespan {expert.makespan:g}, bound {expert.bound:g}, "
               f"{expert.seconds:.2f} s", file=sys.stderr)
-        if expert.bound > bound:
+        if expert.bound > bound and proves_executor_bound(inst, expert):
             bound, source = expert.bound, "CP-SAT"
     makespan = result.schedule.makespan
+    if bound > makespan + TOLERANCE:  # a bound above a schedule found would be a bug: say so
+        print(f"{policy.name}: warning: lower bound {bound:g} above the makespan {makespan:g} (a bug in the bound)",
+              file=sys.stderr)
     result.schedule.extra.update({"bound": bound, "gap": gap(makespan, bound)})
     print(f"{policy.name}: makespan {makespan:g}, lower bound {bound:g} ({source}; critical path with the least "
           f"travel {bounds.critical_path:g}, workload {bounds.workload:g}), gap {100 * gap(makespan, bound):.2f} %",
@@ -209,6 +214,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     if getattr(args, "recipe", None):
         return _run_recipe(args)
+    from lvws_ros.learning.training import training_device
+
+    training_device(args.device)  # a device that is not there is refused now, not after hours of labelling
     from lvws_ros.learning.gatn import GATNConfig
     from lvws_ros.learning.training import PipelineConfig, TrainConfig, run_pipeline
 

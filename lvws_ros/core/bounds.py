@@ -5,9 +5,10 @@ size (the exact solver proves optima only on small cells):
 
 * **critical path with the least travel**: a task starts no earlier than the end of its
   prerequisites, nor before a subteam covering it (Eqs. 10-11) can first be at its site,
-  each robot setting out from where it starts at time 0 over the shortest route between
-  sites at its speed (so the bound holds whatever order a robot visits sites in); the
-  longest such chain, each task's duration and the longest duration path after it added;
+  each robot setting out from where it starts at time 0 by the quickest way between sites
+  (driving at its speed or riding a transport, in any order, so the bound holds whatever
+  a robot does first); the longest such chain, each task's duration and the longest
+  duration path after it added;
 * **workload over capacity**: the robot-seconds every task needs (at least as many robots
   as carry its payload, at least one) over the team's size; for each capability, the
   seconds of the tasks needing it over its holders; the payload-seconds over the team's
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import TOLERANCE, FloatArray, earliest_cover
+from lvws_ros.core.subteams import TOLERANCE, FloatArray, earliest_cover, fewest_carriers
 
 __all__ = ["Bounds", "gap", "lower_bounds"]
 
@@ -40,10 +41,10 @@ class Bounds:
         return max(self.critical_path, self.workload)
 
 
-def _shortest_routes(distance: FloatArray) -> FloatArray:
-    """All-pairs shortest route lengths between sites (Floyd-Warshall): a robot may visit
-    sites in any order, so the direct distance bounds nothing when a detour is shorter."""
-    d = np.array(distance, dtype=np.float64)
+def _shortest_times(seconds: FloatArray) -> FloatArray:
+    """All-pairs shortest times between sites (Floyd-Warshall): a robot may visit sites
+    in any order, so the direct time bounds nothing when a detour is quicker."""
+    d = np.array(seconds, dtype=np.float64)
     np.fill_diagonal(d, 0.0)
     for k in range(len(d)):
         d = np.minimum(d, d[:, k:k + 1] + d[k:k + 1, :])
@@ -51,21 +52,29 @@ def _shortest_routes(distance: FloatArray) -> FloatArray:
 
 
 def _release(inst: Instance) -> FloatArray:
-    """(M,) the earliest a covering subteam can be at each task's meeting site (0 without travel)."""
+    """(M,) the earliest a covering subteam can be at each task's meeting site (0 without
+    travel). A mobile robot gets from site a to b by driving at its speed or by riding a
+    transport from a to b (which takes the transport's duration, whatever the distance),
+    in any order: the shortest such times, per speed."""
     tr = inst.travel
     m = inst.num_tasks
     if tr is None or m == 0:
         return np.zeros(m)
-    routes = _shortest_routes(tr.distance)
     site = np.asarray(tr.robot_site, dtype=np.int64)
     speed = np.asarray(tr.robot_speed, dtype=np.float64)
     meet = np.asarray(tr.task_from, dtype=np.int64)
-    moves = meet != np.asarray(tr.task_to, dtype=np.int64)
-    fixed = speed <= 0
-    with np.errstate(divide="ignore"):
-        times = routes[np.ix_(site, meet)] / np.where(fixed, 1.0, speed)[:, None]
-    times[fixed[:, None] & (site[:, None] != meet[None, :])] = np.inf  # a fixed robot only at its site
-    times[fixed[:, None] & moves[None, :]] = np.inf  # and never on a task that moves its team
+    to = np.asarray(tr.task_to, dtype=np.int64)
+    moves = meet != to
+    ride = np.full_like(tr.distance, np.inf, dtype=np.float64)  # the quickest transport from a to b
+    for j in np.flatnonzero(moves):
+        ride[meet[j], to[j]] = min(ride[meet[j], to[j]], float(inst.durations[j]))
+    times = np.full((inst.num_robots, m), np.inf)
+    for v in np.unique(speed[speed > 0]):
+        quickest = _shortest_times(np.minimum(tr.distance / v, ride))
+        mine = np.flatnonzero(speed == v)
+        times[mine] = quickest[np.ix_(site[mine], meet)]
+    fixed = np.flatnonzero(speed <= 0)  # a fixed robot: only at its site, never on a task that moves its team
+    times[fixed] = np.where((site[fixed][:, None] == meet[None, :]) & ~moves[None, :], 0.0, np.inf)
     out = earliest_cover(times, inst.robot_caps, inst.robot_payload, inst.task_caps, inst.task_payload)
     return np.where(np.isfinite(out), out, 0.0)  # never covered from time 0: no bound from it
 
@@ -85,8 +94,7 @@ def _workload(inst: Instance) -> float:
     if m == 0 or n == 0:
         return 0.0
     durations = inst.durations
-    ordered = np.sort(inst.robot_payload)[::-1].cumsum()
-    fewest = np.minimum(np.searchsorted(ordered, inst.task_payload - TOLERANCE) + 1, n)  # robots for the payload
+    fewest = np.minimum(fewest_carriers(inst.robot_payload, inst.task_payload), n)  # robots for the payload
     ratios = [float((durations * np.maximum(fewest, 1)).sum()) / n]
     holders = inst.robot_caps.sum(axis=0)
     for k in range(inst.task_caps.shape[1]):
@@ -94,7 +102,7 @@ def _workload(inst: Instance) -> float:
             ratios.append(float(durations[inst.task_caps[:, k]].sum()) / float(holders[k]))
     team = float(inst.robot_payload.sum())
     if team > 0:
-        ratios.append(float((inst.task_payload * durations).sum()) / team)
+        ratios.append(float((np.maximum(inst.task_payload - TOLERANCE, 0.0) * durations).sum()) / team)
     return max(ratios)
 
 

@@ -27,6 +27,7 @@ __all__ = [
     "covered",
     "covers",
     "earliest_cover",
+    "fewest_carriers",
     "helps",
     "minimal_subteams",
     "shortfall",
@@ -96,6 +97,13 @@ def earliest_cover(times: FloatArray, caps: BoolArray, payloads: FloatArray, nee
         first = ok.argmax(axis=0)
         out[cols] = np.where(ok.any(axis=0), soon[first, np.arange(soon.shape[1])], np.inf)
     return out
+
+
+def fewest_carriers(robot_payload: FloatArray, need_payload: FloatArray) -> IntArray:
+    """(m,): the fewest robots whose payloads add up to each need (Eq. 11): the heaviest
+    first; one more than the team when even all of them fall short."""
+    ordered = np.sort(np.asarray(robot_payload, dtype=np.float64))[::-1].cumsum()
+    return np.searchsorted(ordered, np.asarray(need_payload, dtype=np.float64) - TOLERANCE).astype(np.int64) + 1
 
 
 def helps(robot_caps: BoolArray, need_caps: BoolArray, need_payload: FloatArray) -> BoolArray:

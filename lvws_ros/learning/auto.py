@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +48,7 @@ from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import ExpertError, PolicyError
 from lvws_ros.learning.policies import OutOfTime, Until
 from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, LVWSSamplePolicy, sample_schedules
-from lvws_ros.learning.search import FollowedPlan, PlannedStep
+from lvws_ros.learning.search import FollowedPlan, PlannedStep, planned_steps
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 DEFAULT_BUDGET_MS = 1000.0
@@ -100,20 +102,21 @@ class AutoPolicy:
             return None
 
     def _offer_run(self, state: State, res: SimulationResult) -> bool:
-        steps = [PlannedStep(r.time, r.free_robots, r.ready_tasks, r.decision) for r in res.steps]
-        return self._offer(state, float(res.schedule.makespan), steps, res.schedule)
+        return self._offer(state, float(res.schedule.makespan), planned_steps(res), lambda: res.schedule)
 
-    def _offer(self, state: State, makespan: float, steps: list[PlannedStep], schedule: Schedule) -> bool:
-        """Follow ``steps`` from ``state`` when shorter than the plan (True then)."""
+    def _offer(self, state: State, makespan: float, steps: list[PlannedStep],
+               schedule: Callable[[], Schedule]) -> bool:
+        """Follow ``steps`` from ``state`` when shorter than the plan (True then);
+        ``schedule`` makes the plan's whole schedule (CP-SAT's warm start), only then."""
         if steps and makespan < (self.plan.makespan if self.plan.steps else math.inf) - TOLERANCE:
             self.plan.replace(state.instance, steps, makespan)
-            self._schedule = schedule
+            self._schedule = schedule()
             return True
         return False
 
     def _exact(self, state: State, deadline: float) -> None:
         """CP-SAT from ``state``, warm-started from the plan, within the time left."""
-        from lvws_ros.policies.exact import ExactPolicy
+        from lvws_ros.policies.exact import ExactPolicy, proves_executor_bound
 
         todo = int(np.sum((state.task_status == TaskStatus.QUEUED) | (state.task_status == TaskStatus.READY)))
         left = deadline - time.perf_counter()
@@ -129,8 +132,9 @@ class AutoPolicy:
             return
         if self._offer_run(state, res):
             self.improved["exact"] += 1
-        if expert.result.proven and abs(float(res.schedule.makespan) - self.plan.makespan) <= TOLERANCE:
-            self.proven = True
+        if expert.result.proven and proves_executor_bound(state.instance, expert.result) \
+                and abs(float(res.schedule.makespan) - self.plan.makespan) <= TOLERANCE:
+            self.proven = True  # optimal for the executor's model too: nothing left to improve
 
     def decide(self, state: State) -> Decision:
         deadline = time.perf_counter() + self.budget_ms / 1000
@@ -148,10 +152,16 @@ class AutoPolicy:
             self.quick_makespan = self.plan.makespan if self.plan.steps else math.nan
         if time.perf_counter() < deadline:
             self._exact(state, deadline)
-        while not self.proven and self.sampler.temperature > 0 and time.perf_counter() < deadline:
-            for s in sample_schedules(self.sampler.base, state, self.sampler.samples, self.sampler.temperature,
-                                      self.rng, deadline=deadline):
-                if self._offer(state, s.makespan, s.steps, schedule_from_state(s.final, self.name)):
+        one = math.inf  # seconds per sampled schedule in the latest round: rounds sized to the time left
+        while not self.proven and self.sampler.temperature > 0 and (t0 := time.perf_counter()) < deadline:
+            count = self.sampler.samples if not math.isfinite(one) else \
+                min(self.sampler.samples, max(1, int((deadline - t0) / max(one, 1e-6))))
+            found = sample_schedules(self.sampler.base, state, count, self.sampler.temperature, self.rng,
+                                     deadline=deadline)
+            one = (time.perf_counter() - t0) / count
+            for s in found:
+                final = s.final
+                if self._offer(state, s.makespan, s.steps, partial(schedule_from_state, final, self.name)):
                     self.improved["sample"] += 1
         if not self.plan.steps:
             self.fallbacks += 1

@@ -58,7 +58,7 @@ import numpy.typing as npt
 
 from lvws_ros.core.executor import State, TaskStatus
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import TOLERANCE, covered, earliest_cover, helps
+from lvws_ros.core.subteams import TOLERANCE, covered, earliest_cover, fewest_carriers, helps
 
 ROBOT_FEATURES = 7
 TASK_FEATURES = 17
@@ -119,8 +119,7 @@ class InstanceFeatures:
         self.robots[:, 4] = robot_rarity
         self.robots[:, 5] = help_ij.mean(axis=1) if m else 0.0
         self.robots[:, 6] = alone.mean(axis=1) if m else 0.0
-        ordered = np.sort(inst.robot_payload)[::-1].cumsum()
-        fewest = np.searchsorted(ordered, inst.task_payload - TOLERANCE) + 1  # robots needed for the payload
+        fewest = fewest_carriers(inst.robot_payload, inst.task_payload)  # robots needed for the payload
         self.tasks = np.zeros((m, TASK_FEATURES), np.float32)
         self.tasks[:, 3] = inst.task_payload / self.payload_unit
         self.tasks[:, 4] = inst.task_payload / team if team > 0 else 0.0

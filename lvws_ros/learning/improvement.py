@@ -228,6 +228,11 @@ def improve(init: str | Path, train_set: Sequence[Instance], val_set: Sequence[I
     digest = hashlib.sha256("".join(instance_key(i) for i in val_set).encode()).hexdigest()[:12]
     optima = validation_optima(val_set, cfg.validation_time_limit,
                                Path(cache_dir) / f"optima-{digest}.json" if cache_dir else None, log)
+    if not train_set:
+        raise ConfigError("self-improvement: no training instances (give datasets, families, --instances or --large)")
+    if not optima:
+        raise ConfigError(f"self-improvement: none of the {len(val_set)} validation instances has a proven optimum "
+                          f"(CP-SAT, {cfg.validation_time_limit:g} s each): no round could be kept")
     best_score = validation_score(model, val_set, optima, idle_bias)
     history: list[dict[str, Any]] = [{"round": 0, "validation_suboptimality": best_score, "kept": True}]
     first = 1

@@ -97,7 +97,7 @@ def sample_schedules(policy: LVWSPolicy, state: State, samples: int, temperature
             s = states[k]
             if k in need:
                 r, wait = outs[row[need[k]]]
-                if not np.isfinite(r).all():
+                if not np.isfinite(r).all() or (wait is not None and not np.isfinite(wait).all()):
                     raise PolicyError(f"{policy.name}: the model gave non-finite rewards at t={s.time:g}")
                 noisy = r + temperature * rng.gumbel(size=r.shape) if temperature > 0 else r
                 d = policy.match(s, noisy, wait=wait)

@@ -43,7 +43,16 @@ from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, Policy, State, advance, check_decision, plan_step_near, simulate
+from lvws_ros.core.executor import (
+    Decision,
+    Policy,
+    SimulationResult,
+    State,
+    advance,
+    check_decision,
+    plan_step_near,
+    simulate,
+)
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import PolicyError
@@ -61,6 +70,11 @@ class PlannedStep:
     free: tuple[int, ...]
     ready: tuple[int, ...]
     decision: Decision
+
+
+def planned_steps(result: SimulationResult) -> list[PlannedStep]:
+    """The decision steps of a simulated schedule, as a plan to follow."""
+    return [PlannedStep(r.time, r.free_robots, r.ready_tasks, r.decision) for r in result.steps]
 
 
 def _step(state: State, decision: Decision) -> PlannedStep:
@@ -164,8 +178,7 @@ class LVWSBeamPolicy:
                 res = simulate(state.instance, runner, state=state, record_states=False)
             except PolicyError:
                 continue
-            yield (float(res.schedule.makespan),
-                   [PlannedStep(r.time, r.free_robots, r.ready_tasks, r.decision) for r in res.steps])
+            yield float(res.schedule.makespan), planned_steps(res)
 
     def search(self, state: State) -> list[PlannedStep]:
         """The decisions, from ``state`` to the end, of the shortest schedule the search

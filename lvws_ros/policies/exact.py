@@ -90,6 +90,14 @@ class ExpertResult:
         return max(0.0, (self.makespan - self.bound) / self.makespan)
 
 
+def proves_executor_bound(inst: Instance, result: ExpertResult) -> bool:
+    """Whether CP-SAT's bound (and "optimal") hold for the executor's model too, not only
+    for the expert's: without travel (minimal subteams then lose no optimum) and on an
+    exact time scale (no rounding to ticks). With travel, a rider on a transport or a
+    superset subteam can beat the expert's model, so its bound bounds only that model."""
+    return inst.travel is None and result.exact_scale
+
+
 def _time_scale(values: np.ndarray) -> tuple[int, bool]:
     for s in SCALES:
         scaled = values * s

@@ -64,3 +64,53 @@ def test_lvws_solve_prints_and_writes_the_bound_and_the_gap(tmp_path, capsys):
     data = json.loads(out.read_text())
     assert 0 < data["bound"] <= data["makespan"] and data["gap"] == pytest.approx(
         (data["makespan"] - data["bound"]) / data["makespan"])
+
+
+def _travel_instance(name, caps, robots, tasks, sites, moves):
+    from lvws_ros.core.travel import build_travel
+
+    tr = build_travel(sites, {}, [(r.id, site, 1.0) for r, site in robots], moves)
+    return Instance(name, caps, tuple(r for r, _ in robots), tasks, travel=tr)
+
+
+def test_a_transport_is_a_quick_way_between_sites_for_the_bound():
+    """A 1 s transport carries its robot 100 m: the bound must not count the 100 s drive."""
+    inst = _travel_instance("ride", ("x",), [(Robot("r0", (1,), 1.0), "A")],
+                            (Task("t0", (1,), 0.0, 1.0), Task("t1", (1,), 0.0, 1.0)),
+                            {"A": [0, 0], "B": [100, 0]}, [("t0", "A", "B"), ("t1", "B", "B")])
+    b = lower_bounds(inst)
+    assert b.best <= 2.0 + 1e-9
+    assert simulate(inst, GreedyPayloadPolicy()).schedule.makespan == pytest.approx(2.0)
+
+
+def test_cp_sats_bound_with_travel_is_not_taken_as_the_instances(tmp_path, capsys):
+    """With travel a rider can beat the expert's model (minimal subteams): r1 rides along
+    on t0 and is at B for t1 at 12, which the expert's 'optimal' 22 does not see."""
+    from lvws_ros.core.executor import Decision
+    from lvws_ros.core.formats import save_instance
+    from lvws_ros.policies.exact import proves_executor_bound
+
+    inst = _travel_instance("rider", ("x", "y"), [(Robot("r0", (1, 0), 1.0), "A"), (Robot("r1", (0, 1), 1.0), "A")],
+                            (Task("t0", (1, 0), 0.0, 1.0), Task("t1", (0, 1), 0.0, 1.0, ("t0",))),
+                            {"A": [0, 0], "B": [10, 0]}, [("t0", "B", "B"), ("t1", "B", "B")])
+
+    class Rider:
+        name = "rider"
+
+        def reset(self, instance):
+            pass
+
+        def decide(self, state):
+            ready = state.ready_tasks()
+            return Decision(((0, (0, 1)),) if 0 in ready else ((1, (1,)),) if 1 in ready else ())
+
+    assert simulate(inst, Rider()).schedule.makespan == pytest.approx(12.0)
+    expert = solve_exact(inst, workers=1, time_limit=5)
+    assert not proves_executor_bound(inst, expert)
+    assert lower_bounds(inst).best <= 12.0 + 1e-9
+    path = tmp_path / "rider.json"
+    save_instance(inst, path)
+    out = tmp_path / "s.json"
+    assert main(["solve", str(path), "--policy", "exact", "--workers", "1", "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["bound"] <= 12.0 + 1e-9
+    assert "warning" not in capsys.readouterr().err
