@@ -191,8 +191,6 @@ RECIPE_PASSED = ("--cache-dir", "--processes", "--ray-address", "--device")  # t
 def _run_recipe(args: argparse.Namespace) -> int:
     """``lvws train --recipe NAME --out OUT``: each stage of the recipe with its own
     flags (the stages before the last write OUT's ``.stageN.pt``)."""
-    from lvws_ros.cli.main import build_parser
-
     stages = RECIPES[args.recipe]
     out = Path(args.out)
     passed = [x for flag in RECIPE_PASSED if (value := getattr(args, flag[2:].replace("-", "_"))) is not None
@@ -202,11 +200,25 @@ def _run_recipe(args: argparse.Namespace) -> int:
         target = out if k == len(stages) else out.with_suffix(f".stage{k}.pt")
         argv = ["train", *(a.replace("{previous}", previous) for a in stage), *passed, "--out", str(target)]
         print(f"recipe {args.recipe}, stage {k} of {len(stages)}: lvws {' '.join(argv)}", file=sys.stderr)
-        stage_args = build_parser().parse_args(argv)
+        stage_args = _train_parser().parse_args(argv)
         if cmd_train(stage_args) != 0:
             return 1
         previous = str(target)
     return 0
+
+
+def _train_parser() -> argparse.ArgumentParser:
+    """A parser of ``train`` alone (a recipe's stages), as ``lvws`` parses it."""
+    parser = argparse.ArgumentParser(prog="lvws")
+    sub = parser.add_subparsers(dest="command")
+
+    def add(name: str, func: Any, help_text: str) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        p.set_defaults(func=func)
+        return p
+
+    _add_train(add)
+    return parser
 
 
 def cmd_train(args: argparse.Namespace) -> int:
