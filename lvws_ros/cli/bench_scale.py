@@ -8,7 +8,8 @@ nothing asserted.
 * scheduler-node decision latency p50/p99 at 100 x 500: the node's work without DDS
   (message -> snapshot conversion of both messages, OnlineScheduler.decide) at each
   decision step of a whole run, with travel (sites in the messages) on the depot family;
-* the exact expert on 24-40 robots x 30 tasks (subteam-heavy): status, bound and gap in 60 s.
+* the exact expert on 24-40 robots x 30 tasks (subteam-heavy): status, bound and gap in 60 s;
+* large-neighbourhood search from GRP's schedule at 30 x 100 and 100 x 500 (60 s each).
 """
 
 from __future__ import annotations
@@ -191,7 +192,34 @@ def bench_exact_large_teams(seed: int, time_limit: float = 60.0, workers: int = 
               f"{res.seconds:.1f} | {'yes' if not check_schedule(inst, res.schedule) else 'NO'} |", flush=True)
 
 
+LNS_SECONDS = 60.0
+
+
+def bench_lns(seed: int, seconds: float = LNS_SECONDS) -> None:
+    """Large-neighbourhood search from GRP's schedule (lvws_ros/policies/lns.py), one worker."""
+    from lvws_ros.core.bounds import lower_bounds
+    from lvws_ros.core.executor import simulate
+    from lvws_ros.core.schedule import check_schedule
+    from lvws_ros.policies.lns import DEFAULT_WINDOW, improve
+    from lvws_ros.registry import make_policy
+
+    print(f"\n## Large-neighbourhood search from GRP (seed {seed}, {seconds:g} s, 1 worker, window {DEFAULT_WINDOW})")
+    print("| family | N x M | GRP | LNS | LNS / GRP | rounds | improved | lower bound | LNS gap | valid |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for family, n, m in (("subteam-heavy", 30, 100), ("ours", 30, 100), ("subteam-heavy", 100, 500),
+                         ("ours", 100, 500)):
+        inst = make_instance(family, n, m, seed)
+        grp = simulate(inst, make_policy("grp")).schedule
+        found = improve(inst, grp, time_limit=seconds, seed=seed)
+        bound = lower_bounds(inst).best
+        lns = float(found.schedule.makespan)
+        print(f"| {family} | {n} x {m} | {grp.makespan:g} | {lns:g} | {lns / grp.makespan:.3f} | {found.rounds} | "
+              f"{found.improved} | {bound:g} | {100 * (lns - bound) / lns:.1f} % | "
+              f"{'yes' if not check_schedule(inst, found.schedule) else 'NO'} |", flush=True)
+
+
 def main(seed: int = 0, limit: float = 600.0) -> None:
+    bench_lns(seed)
     bench_exact_large_teams(seed)
     bench_node_latency(seed)
     bench_whole_schedules(seed, limit)

@@ -7,7 +7,8 @@ plan to follow, ``auto``
    finish, under the budget), and takes the shorter;
 2. improves it while the budget lasts: CP-SAT from the state, warm-started from the
    incumbent (for a cell of at most ``exact_tasks`` tasks still to do; a proof of
-   optimality ends the search for the run), then LVWS sampling
+   optimality ends the search for the run) or, for a bigger cell without travel,
+   large-neighbourhood search on the plan (:mod:`~lvws_ros.policies.lns`), then LVWS sampling
    (:func:`~lvws_ros.learning.sampling.sample_schedules`) in rounds sized to the time left;
 3. follows the best plan (:class:`~lvws_ros.learning.search.FollowedPlan`, with the drift
    rule of :data:`~lvws_ros.core.executor.PLAN_DRIFT`); when the world departs from it (a
@@ -76,7 +77,7 @@ class AutoPolicy:
         self.quick_makespan = math.nan  # of the latest quick plan
         self.rng = np.random.default_rng(seed)
         self.plans = self.fallbacks = 0  # plans made afresh; steps decided by GRP alone (no plan in the budget)
-        self.improved = {"exact": 0, "sample": 0}  # times each improver shortened the plan
+        self.improved = {"exact": 0, "lns": 0, "sample": 0}  # times each improver shortened the plan
         self._schedule: Schedule | None = None  # the plan's whole schedule (CP-SAT's warm start)
 
     def reset(self, instance: Instance) -> None:
@@ -88,7 +89,7 @@ class AutoPolicy:
         self.quick_makespan = math.nan
         self.rng = np.random.default_rng(self.seed)
         self.plans = self.fallbacks = 0
-        self.improved = {"exact": 0, "sample": 0}
+        self.improved = {"exact": 0, "lns": 0, "sample": 0}
 
     @property
     def planned_makespan(self) -> float:
@@ -120,7 +121,10 @@ class AutoPolicy:
 
         todo = int(np.sum((state.task_status == TaskStatus.QUEUED) | (state.task_status == TaskStatus.READY)))
         left = deadline - time.perf_counter()
-        if todo > self.exact_tasks or left <= 0.01:
+        if left <= 0.01:
+            return
+        if todo > self.exact_tasks:
+            self._lns(state, left * EXACT_SHARE)
             return
         hint = self._schedule if self.plan.steps else None  # warm start: the plan followed
         expert = ExactPolicy(time_limit=left * EXACT_SHARE, workers=self.workers, seed=self.seed, hint=hint)
@@ -135,6 +139,25 @@ class AutoPolicy:
         if expert.result.proven and proves_executor_bound(state.instance, expert.result) \
                 and abs(float(res.schedule.makespan) - self.plan.makespan) <= TOLERANCE:
             self.proven = True  # optimal for the executor's model too: nothing left to improve
+
+    def _lns(self, state: State, seconds: float) -> None:
+        """Large-neighbourhood search on the plan from ``state`` (cells too big for CP-SAT's
+        whole model; not with travel), followed when shorter."""
+        from lvws_ros.policies.exact import ExactPolicy, ExpertResult
+        from lvws_ros.policies.lns import improve
+
+        if state.instance.travel is not None or self._schedule is None or not self.plan.steps or seconds <= 0.05:
+            return
+        found = improve(state.instance, self._schedule, state=state, time_limit=seconds, workers=1,
+                        seed=self.seed + state.step)
+        if not found.improved:
+            return
+        follower = ExactPolicy(time_limit=0.1, workers=1, seed=self.seed)
+        follower.follow(ExpertResult(found.schedule, "feasible", found.schedule.makespan, math.nan, found.seconds,
+                                     False), state)
+        res = self._finish(follower, state, None)
+        if res is not None and self._offer_run(state, res):
+            self.improved["lns"] += 1
 
     def decide(self, state: State) -> Decision:
         deadline = time.perf_counter() + self.budget_ms / 1000

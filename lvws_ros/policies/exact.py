@@ -27,7 +27,8 @@ An answer is called optimal only when CP-SAT proved it on exactly scaled duratio
 otherwise the status is ``feasible`` with the best bound and the gap.
 
 :func:`exact_match` solves one decision step's matching (Eqs. 7-11) exactly, for
-comparison with the greedy matching. This is the only module that imports OR-Tools.
+comparison with the greedy matching. This module and :mod:`~lvws_ros.policies.lns` (the
+large-neighbourhood search built on it) are the only ones that import OR-Tools.
 """
 
 from __future__ import annotations
@@ -551,6 +552,16 @@ class ExactPolicy:
         return any(self._leave.get(a.task, a.start) < now - TOLERANCE
                    for j in state.ready_tasks() if (a := self._plan.get(j)) is not None)
 
+    def follow(self, result: ExpertResult, state: State) -> None:
+        """Follow ``result``'s schedule from ``state`` (a schedule made elsewhere, e.g. by
+        :mod:`~lvws_ros.policies.lns`) instead of solving; it solves again only when the
+        world departs from it."""
+        assert result.schedule is not None
+        inst = state.instance
+        self.result, self.hint = result, None
+        self._plan = {inst.task_index[a.task]: a for a in result.schedule.assignments}
+        self._leave = departures(inst, result.schedule, state)
+
     def decide(self, state: State) -> Decision:
         inst = state.instance
         now = self._plan_time(state.time) if self.result is not None else None
@@ -560,9 +571,7 @@ class ExactPolicy:
             self.result = solve_exact(inst, state=state, time_limit=self.time_limit, workers=self.workers, seed=self.seed,
                                       hint=self.hint)
             self.hint = None
-            assert self.result.schedule is not None
-            self._plan = {inst.task_index[a.task]: a for a in self.result.schedule.assignments}
-            self._leave = departures(inst, self.result.schedule, state)  # = starts without travel
+            self.follow(self.result, state)  # departures = starts without travel
             now = state.time
             self.solves += 1
         assert now is not None  # the plan's step: the world's, or the state's when just planned

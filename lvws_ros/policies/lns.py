@@ -1,0 +1,209 @@
+"""Large-neighbourhood search: CP-SAT over a window of an incumbent schedule, the rest fixed.
+
+For cells too big for the exact expert's whole model (hundreds of tasks and robots), a
+schedule is improved one neighbourhood at a time. Each round picks a window of the
+incumbent: the ``window`` tasks that start first at or after a chosen time ``t0``.
+
+* tasks that start before ``t0`` (and, from a mid-run state, those done or in progress)
+  stay as they are: each robot is free from the end of its last one on;
+* the window's tasks choose their subteams anew (the boolean formulation of the exact
+  expert: a robot-task boolean, a holder of each needed capability and payloads adding
+  up, Eqs. 10-11) and their starts;
+* the next ``LATER`` windows' worth of later tasks keep their subteams and, per robot, their
+  order; their starts move with the window (a left or right shift); the tasks after them
+  are not in the model (the left shift below places them);
+* precedence, one task at a time per robot (no-overlap over the window's optional
+  intervals and the later tasks' fixed ones), the makespan.
+
+The objective is the makespan, then the sum of the tasks' ends (so that a window off the
+critical path can still make room). CP-SAT is hinted with the incumbent. The solution's
+subteams and per-robot orders are left-shifted in real time
+(:func:`~lvws_ros.policies.exact.left_shift`) and kept only when shorter (or as short with
+a smaller sum of ends). Windows are chosen at random times, and every third one ends at
+the incumbent's makespan (the tasks that make it). The result is valid by construction
+and checked by :func:`~lvws_ros.core.schedule.check_schedule`.
+
+Travel (sequence-dependent set-ups) is not in this neighbourhood model: with travel the
+search returns the incumbent and says so in ``LNSResult.reason``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from ortools.sat.python import cp_model
+
+from lvws_ros.core.executor import State, TaskStatus
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
+from lvws_ros.core.subteams import TOLERANCE, covers, prune
+from lvws_ros.errors import ExpertError
+from lvws_ros.policies.exact import _payload_units, _time_scale, left_shift
+
+DEFAULT_WINDOW = 12  # tasks re-planned per neighbourhood
+ROUND_LIMIT = 0.5  # seconds CP-SAT may take for one neighbourhood
+LATER = 2  # tasks after the window in the model (shifted, not re-planned), in windows
+
+__all__ = ["DEFAULT_WINDOW", "LNSResult", "improve"]
+
+
+@dataclass
+class LNSResult:
+    schedule: Schedule
+    rounds: int  # neighbourhoods solved
+    improved: int  # of them that shortened the schedule (or kept it and ended its tasks earlier)
+    start_makespan: float
+    seconds: float
+    reason: str = ""  # why nothing was searched, when so
+
+
+def _score(s: Schedule) -> tuple[float, float]:
+    return float(s.makespan), float(sum(a.end for a in s.assignments))
+
+
+def _better(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    """``a`` shorter than ``b``, or as short with its tasks ending earlier in all."""
+    if a[0] < b[0] - TOLERANCE:
+        return True
+    return abs(a[0] - b[0]) <= TOLERANCE and a[1] < b[1] - TOLERANCE * max(1.0, abs(b[1]))
+
+
+def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int], window: list[int],
+                  later: list[int], scale: int, time_limit: float, workers: int, seed: int) -> Schedule | None:
+    """One neighbourhood: the window's subteams and starts free, the later tasks' subteams
+    and per-robot orders fixed, the prefix as it is (tasks after ``later`` are not in the
+    model: the left shift places them); the left-shifted solution (None: none in time)."""
+    by_task = inc.by_task()
+    dur = {j: max(1, round(float(inst.durations[j]) * scale)) for j in window + later}
+    free = set(window) | set(later)
+    # Ends of the fixed prefix, in ticks (rounded up: nothing starts before a real end).
+    fixed_end = {j: math.ceil(by_task[inst.tasks[j].id].end * scale - 1e-9) for j in prefix}
+    release = np.ceil(np.maximum(state.robot_free_at, state.time) * scale - 1e-9).astype(np.int64)
+    for j, tick in fixed_end.items():
+        for name in by_task[inst.tasks[j].id].robots:
+            k = inst.robot_index[name]
+            release[k] = max(release[k], tick)
+    t0 = math.ceil(state.time * scale - 1e-9)
+    upper = int(sum(dur.values()) + max([t0, *release.tolist(), *fixed_end.values()]))
+    model = cp_model.CpModel()
+    start = {j: model.new_int_var(t0, upper, f"S_{j}") for j in free}
+    end = {j: start[j] + dur[j] for j in free}
+    makespan = model.new_int_var(max([t0, *fixed_end.values()]), upper, "C")
+    per_robot: list[list[cp_model.IntervalVar]] = [[] for _ in inst.robots]
+    pay_int, need_int = _payload_units(inst)
+    member: dict[int, dict[int, cp_model.IntVar]] = {}
+    for j in window:
+        need = inst.task_caps[j]
+        useful = np.flatnonzero((inst.robot_caps & need).any(axis=1) | (inst.tasks[j].payload > TOLERANCE))
+        member[j] = {int(r): model.new_bool_var(f"y_{r}_{j}") for r in useful}
+        for c in np.flatnonzero(need):  # Eq. 10
+            model.add_bool_or([member[j][r] for r in member[j] if inst.robot_caps[r, c]])
+        if need_int[j] > 0:  # Eq. 11
+            model.add(sum(int(pay_int[r]) * y for r, y in member[j].items()) >= int(need_int[j]))
+        hinted = {inst.robot_index[r] for r in by_task[inst.tasks[j].id].robots}
+        for r, y in member[j].items():
+            per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
+            model.add(start[j] >= int(release[r])).only_enforce_if(y)
+            model.add_hint(y, r in hinted)
+    last: dict[int, int] = {}  # robot -> its latest later task so far (per-robot order kept)
+    for j in sorted(later, key=lambda k: (by_task[inst.tasks[k].id].start, k)):
+        for name in by_task[inst.tasks[j].id].robots:
+            r = inst.robot_index[name]
+            per_robot[r].append(model.new_fixed_size_interval_var(start[j], dur[j], f"I_{r}_{j}"))
+            model.add(start[j] >= int(release[r]))
+            if r in last:
+                model.add(start[j] >= end[last[r]])
+            last[r] = j
+    for j in free:
+        for p in inst.prerequisites[j]:
+            model.add(start[j] >= (end[p] if p in free else fixed_end[p]))
+        model.add(makespan >= end[j])
+    for intervals in per_robot:
+        if len(intervals) > 1:
+            model.add_no_overlap(intervals)
+    weight = len(free) * (upper + 1) + 1
+    model.minimize(weight * makespan + sum(end.values()))
+    for j in free:  # the incumbent, on the tick scale, as the hint
+        model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = max(0.01, time_limit)
+    solver.parameters.num_workers = workers
+    solver.parameters.random_seed = seed
+    status = solver.solve(model)
+    if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        return None
+    # The left shift keeps each robot's order by start: the tasks after the model go after
+    # every task in it, in their own order (a common offset), as they did in the incumbent.
+    fixed = set(prefix)
+    offset = max([0.0, *(solver.value(start[j]) / scale + float(inst.durations[j]) for j in free)])
+    out = [a if inst.task_index[a.task] in fixed else Assignment(a.task, a.robots, a.start + offset, a.end + offset)
+           for a in inc.assignments if inst.task_index[a.task] not in free]
+    for j in free:
+        t = inst.tasks[j]
+        if j in member:
+            team = [r for r, y in member[j].items() if solver.boolean_value(y)]
+            if not covers(inst.robot_caps[team], inst.robot_payload[team], inst.task_caps[j], t.payload):
+                raise ExpertError(f"task {t.id!r}: the solver's subteam does not cover it (payload rounding)")
+            team = prune(team, inst.robot_caps, inst.robot_payload, inst.task_caps[j], t.payload)
+            robots = tuple(inst.robots[r].id for r in sorted(team))
+        else:
+            robots = by_task[t.id].robots
+        s0 = solver.value(start[j]) / scale
+        out.append(Assignment(t.id, robots, s0, s0 + t.duration))
+    return left_shift(inst, Schedule.from_assignments(inst.name, inc.policy, out), state)
+
+
+def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,
+            window: int = DEFAULT_WINDOW, workers: int = 1, seed: int = 0,
+            round_limit: float = ROUND_LIMIT) -> LNSResult:
+    """Improve ``incumbent`` (a valid schedule of ``inst``, from ``state`` when given) by
+    large-neighbourhood search within ``time_limit`` seconds (module docstring). Never
+    returns a schedule longer than the incumbent; the same seed gives the same windows."""
+    t_start = time.perf_counter()
+    state = State.initial(inst) if state is None else state
+    best = left_shift(inst, incumbent, state)
+    first = float(best.makespan)
+    if inst.travel is not None:
+        return LNSResult(best, 0, 0, first, time.perf_counter() - t_start,
+                         "travel: the neighbourhood model has no travel; the incumbent is returned")
+    if window < 1:
+        raise ExpertError(f"lns: the window must hold at least one task, got {window}")
+    scale, _ = _time_scale(np.concatenate([inst.durations, [state.time]]))
+    rng = np.random.default_rng(seed)
+    started = {j for j in range(inst.num_tasks) if state.task_status[j] >= TaskStatus.ASSIGNED}
+    rounds = improved = 0
+    deadline = t_start + time_limit
+    while (left := deadline - time.perf_counter()) > 0.05:
+        by_task = best.by_task()
+        todo = sorted((j for j in range(inst.num_tasks) if j not in started),
+                      key=lambda j: (by_task[inst.tasks[j].id].start, j))
+        if not todo:
+            break
+        if rounds % 3 == 2:  # the tail: the window of tasks that end the schedule
+            first_at = max(0, len(todo) - window)
+        else:
+            first_at = int(rng.integers(0, max(1, len(todo) - window + 1)))
+        # A window starts at a time: tasks starting then but sorted before it belong to it.
+        t0 = by_task[inst.tasks[todo[first_at]].id].start
+        while first_at > 0 and by_task[inst.tasks[todo[first_at - 1]].id].start >= t0 - TOLERANCE:
+            first_at -= 1
+        picked = todo[first_at:first_at + window]
+        prefix = sorted(started | set(todo[:first_at]))
+        later = todo[first_at + window:first_at + window + LATER * window]
+        cand = _window_model(inst, state, best, prefix, picked, later, scale, min(round_limit, left), workers,
+                             seed + rounds)
+        rounds += 1
+
+        if cand is not None and _better(_score(cand), _score(best)):
+            if check_schedule(inst, cand):
+                raise ExpertError(f"lns: neighbourhood {rounds} gave an invalid schedule (a bug): "
+                                  f"{check_schedule(inst, cand)[0]}")
+            best = cand
+            improved += 1
+        if len(todo) <= window:  # the whole rest fits one window: one solve says all
+            break
+    best.policy = incumbent.policy
+    return LNSResult(best, rounds, improved, first, time.perf_counter() - t_start)
