@@ -158,10 +158,12 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
 
 def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,
             window: int = DEFAULT_WINDOW, workers: int = 1, seed: int = 0,
-            round_limit: float = ROUND_LIMIT) -> LNSResult:
+            round_limit: float = ROUND_LIMIT, bound: float | None = None) -> LNSResult:
     """Improve ``incumbent`` (a valid schedule of ``inst``, from ``state`` when given) by
     large-neighbourhood search within ``time_limit`` seconds (module docstring). Never
-    returns a schedule longer than the incumbent; the same seed gives the same windows."""
+    returns a schedule longer than the incumbent; the same seed gives the same windows.
+    With a lower ``bound`` (:func:`~lvws_ros.core.bounds.lower_bounds`), it stops when the
+    schedule reaches it (optimal)."""
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state
     best = left_shift(inst, incumbent, state)
@@ -177,6 +179,8 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     rounds = improved = 0
     deadline = t_start + time_limit
     while (left := deadline - time.perf_counter()) > 0.05:
+        if bound is not None and best.makespan <= bound + TOLERANCE:
+            break  # optimal: nothing left to shorten
         by_task = best.by_task()
         todo = sorted((j for j in range(inst.num_tasks) if j not in started),
                       key=lambda j: (by_task[inst.tasks[j].id].start, j))

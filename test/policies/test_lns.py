@@ -72,3 +72,10 @@ def test_auto_searches_neighbourhoods_on_a_cell_too_big_for_the_whole_model():
     grp = simulate(inst, GreedyPayloadPolicy()).schedule
     assert sched.makespan <= grp.makespan + 1e-9
     assert auto.improved["lns"] >= 1
+
+
+def test_lns_stops_at_a_lower_bound():
+    inst = _cell()
+    start = simulate(inst, GreedyPayloadPolicy()).schedule
+    found = improve(inst, start, time_limit=30.0, bound=start.makespan)
+    assert found.rounds == 0 and found.seconds < 5.0
