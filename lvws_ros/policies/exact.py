@@ -382,6 +382,20 @@ def _payload_units(inst: Instance) -> tuple[np.ndarray, np.ndarray]:
             np.ceil((inst.task_payload - TOLERANCE) * fine).astype(np.int64))
 
 
+def covering_members(model: cp_model.CpModel, inst: Instance, j: int, pay_int: np.ndarray,
+                     need_int: np.ndarray) -> dict[int, cp_model.IntVar]:
+    """Task ``j``'s subteam in the boolean formulation: a boolean per robot that could
+    help, constrained to cover (Eqs. 10-11; payloads in :func:`_payload_units`' integers)."""
+    need = inst.task_caps[j]
+    useful = np.flatnonzero((inst.robot_caps & need).any(axis=1) | (inst.tasks[j].payload > TOLERANCE))
+    member = {int(r): model.new_bool_var(f"y_{r}_{j}") for r in useful}
+    for c in np.flatnonzero(need):  # Eq. 10
+        model.add_bool_or([member[r] for r in member if inst.robot_caps[r, c]])
+    if need_int[j] > 0:  # Eq. 11
+        model.add(sum(int(pay_int[r]) * y for r, y in member.items()) >= int(need_int[j]))
+    return member
+
+
 def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
     """The formulation for large teams, with no coalition listed: a boolean per robot and
     task (in its subteam or not), the coverage of Eqs. 10-11 as linear constraints (a
@@ -397,13 +411,7 @@ def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
     member: dict[int, dict[int, cp_model.IntVar]] = {}
     counts = []
     for j in todo:
-        need = inst.task_caps[j]
-        useful = np.flatnonzero((inst.robot_caps & need).any(axis=1) | (inst.tasks[j].payload > TOLERANCE))
-        member[j] = {int(r): model.new_bool_var(f"y_{r}_{j}") for r in useful}
-        for c in np.flatnonzero(need):  # Eq. 10
-            model.add_bool_or([member[j][r] for r in member[j] if inst.robot_caps[r, c]])
-        if need_int[j] > 0:  # Eq. 11
-            model.add(sum(int(pay_int[r]) * y for r, y in member[j].items()) >= int(need_int[j]))
+        member[j] = covering_members(model, inst, j, pay_int, need_int)
         for r, y in member[j].items():
             per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
             if h.free_at[r] > h.head[j]:

@@ -41,7 +41,7 @@ from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.core.subteams import TOLERANCE, covers, prune
 from lvws_ros.errors import ExpertError
-from lvws_ros.policies.exact import _payload_units, _time_scale, left_shift
+from lvws_ros.policies.exact import _payload_units, _time_scale, covering_members, left_shift
 
 DEFAULT_WINDOW = 12  # tasks re-planned per neighbourhood
 ROUND_LIMIT = 0.5  # seconds CP-SAT may take for one neighbourhood
@@ -96,13 +96,7 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     pay_int, need_int = _payload_units(inst)
     member: dict[int, dict[int, cp_model.IntVar]] = {}
     for j in window:
-        need = inst.task_caps[j]
-        useful = np.flatnonzero((inst.robot_caps & need).any(axis=1) | (inst.tasks[j].payload > TOLERANCE))
-        member[j] = {int(r): model.new_bool_var(f"y_{r}_{j}") for r in useful}
-        for c in np.flatnonzero(need):  # Eq. 10
-            model.add_bool_or([member[j][r] for r in member[j] if inst.robot_caps[r, c]])
-        if need_int[j] > 0:  # Eq. 11
-            model.add(sum(int(pay_int[r]) * y for r, y in member[j].items()) >= int(need_int[j]))
+        member[j] = covering_members(model, inst, j, pay_int, need_int)
         hinted = {inst.robot_index[r] for r in by_task[inst.tasks[j].id].robots}
         for r, y in member[j].items():
             per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
