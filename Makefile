@@ -15,7 +15,7 @@ EXES := lvws scheduler cell_sim recorder
 export AMENT_PREFIX_PATH := $(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: env msgs test lint demo bench fuzz clean distclean
+.PHONY: env msgs test lint demo docs bench fuzz clean distclean
 
 env: $(VENV)/.stamp-pkg
 
@@ -61,6 +61,11 @@ demo: env
 	$(PY) -m lvws_ros.cli launch --bag-dir bags --out-dir out
 	@echo "Plans with and without travel, executed in the simulator (lvws sim --compare):"
 	$(PY) -m lvws_ros.cli sim --compare grp,lvws,exact,lvws_beam
+
+# The documentation site (Sphinx + MyST, API reference from the docstrings): build/docs/index.html.
+docs: env
+	$(PY) -m sphinx -q -W --keep-going -b html docs $(BUILD)/docs
+	@echo "documentation site: $(BUILD)/docs/index.html"
 
 # Property-based fuzzing of the file formats: 10^4 examples per property, counts printed.
 fuzz: env

@@ -29,7 +29,7 @@ in; a world only a little early or late (a simulator integrating travel) is foll
 then is abandoned, and the best schedule found so far is followed; when none was found
 the step is LVWS's own decision and the next step searches again. None: no budget.
 Cost without a budget: about ``width`` x candidates x 2 simulated finishes per decision
-step of the plan (measured figures: README and ``docs/results.md``).
+step of the plan (measured figures: ``docs/results.md``).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ task takes its duration times a factor in [1 - noise, 1 + noise] drawn from
 ``noise_seed`` and the task's id (:meth:`~lvws_ros.sim.world.CellSim.duration_factor`):
 the world departs from every plan as a real cell does.
 
-The world changes while it runs (the dynamic protocol of the README): scripted events
+The world changes while it runs (the dynamic protocol of docs/ros.md): scripted events
 (parameter ``events``, :mod:`lvws_ros.sim.events`) and the services ``submit_tasks``
 (lvws_msgs/srv/SubmitTasks), ``cancel_task`` (CancelTask) and ``set_robot_fault``
 (SetRobotFault), relative to the node's namespace (``lvws submit / cancel / fault``).

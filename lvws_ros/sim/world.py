@@ -10,7 +10,7 @@ offline runner and the tests drive it.
   it (handling time), carries it at the slowest member's speed, and unloads it. The
   members' payloads must add up to the object's weight (Eq. 11), so only a Jackal +
   Husky subteam can carry Obj1 (7 units).
-* The world changes while it runs (the dynamic protocol of the README): :meth:`CellSim.submit`
+* The world changes while it runs (the dynamic protocol of docs/ros.md): :meth:`CellSim.submit`
   adds tasks, :meth:`CellSim.cancel` removes one (its dependents stop waiting for it),
   :meth:`CellSim.fail` stops a robot where it is and takes it out of the team (its task
   returns READY; a carried object is put down where it is, and a transport picks it up

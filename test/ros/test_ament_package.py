@@ -52,7 +52,7 @@ def test_manifest_declares_ros_dependencies():
     for needed in ["rclpy", "lvws_msgs", "std_msgs", "geometry_msgs", "visualization_msgs",
                    "rosgraph_msgs", "diagnostic_msgs", "python3-numpy", "python3-yaml", "python3-matplotlib"]:
         assert needed in deps, needed
-    # what rosdep cannot install or pin is pinned for pip (README, "colcon")
+    # what rosdep cannot install or pin is pinned for pip (docs/install.md, "colcon")
     pinned = {line.split("==")[0] for line in (REPO / "requirements-python.txt").read_text().splitlines()
               if "==" in line and not line.startswith("#")}
     assert {"torch", "ortools", "pymunk", "rosbags", "mcap", "mcap-ros2-support"} <= pinned

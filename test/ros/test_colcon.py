@@ -1,6 +1,6 @@
 """colcon and rosdep as a ROS 2 user meets them: every dependency key of both package.xml
 files is a key rosdep resolves (ros/rosdistro's rosdep files and Jazzy's packages,
-vendored in test/data), and the README's colcon steps build both packages from a clean
+vendored in test/data), and the colcon steps of docs/install.md build both packages from a clean
 copy, install the executables where ``ros2 run`` looks, and ``colcon test`` runs the
 pytest suite (a selection of it, to keep CI short)."""
 
