@@ -15,7 +15,7 @@ EXES := lvws scheduler cell_sim recorder
 export AMENT_PREFIX_PATH := $(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: env msgs test lint demo docs bench fuzz clean distclean
+.PHONY: env msgs test lint browser demo docs bench fuzz clean distclean
 
 env: $(VENV)/.stamp-pkg
 
@@ -52,15 +52,22 @@ $(VENV)/.stamp-pkg: $(PKG_SRCS) $(VENV)/.stamp-msgs
 
 msgs: $(VENV)/.stamp-msgs
 
-test: env lint
+test: env lint browser
 	$(PY) -m pytest -q -rs test  # -rs: every skip prints its reason
 
-# The paper's case study end to end: cell_sim + scheduler (default policy, the shipped
+# The paper's case study end to end: cell_sim + scheduler (default policy: auto, with the shipped
 # LVWS model) + recorder; the bag lands in bags/, Gantt PNG, GIF and logs in out/.
 demo: env
 	$(PY) -m lvws_ros.cli launch --bag-dir bags --out-dir out
 	@echo "Plans with and without travel, executed in the simulator (lvws sim --compare):"
-	$(PY) -m lvws_ros.cli sim --compare grp,lvws,exact,lvws_beam
+	$(PY) -m lvws_ros.cli sim --compare grp,lvws,auto,exact,lvws_beam
+
+# Debian's Chromium for the dashboard's browser tests (test/ros/test_dashboard.py), when
+# missing: as root with apt-get; elsewhere those tests skip and say why.
+browser:
+	@command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && \
+	  { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } >/dev/null 2>&1; } \
+	  || echo "Chromium could not be installed (needs root and apt-get): the browser tests will skip"
 
 # The documentation site (Sphinx + MyST, API reference from the docstrings): build/docs/index.html.
 docs: env

@@ -16,7 +16,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
-    package_data={PACKAGE: ["py.typed"], f"{PACKAGE}.learning": ["models/*.pt", "models/*.json"]},
+    package_data={PACKAGE: ["py.typed"], f"{PACKAGE}.learning": ["models/*.pt", "models/*.json"],
+                  f"{PACKAGE}.ros": ["dashboard.html"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -89,7 +89,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if args.policy == "auto":
         improved = getattr(policy, "improved", {})
         print(f"auto: quick plan {getattr(policy, 'quick_makespan', float('nan')):g}, improved by CP-SAT "
-              f"{improved.get('exact', 0)} and by sampling {improved.get('sample', 0)} times; "
+              f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)} and by sampling "
+              f"{improved.get('sample', 0)} times; "
               f"{'proven optimal' if getattr(policy, 'proven', False) else 'not proven optimal'}; seed {args.seed}",
               file=sys.stderr)
     if args.out:

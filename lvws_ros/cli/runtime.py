@@ -11,6 +11,8 @@ from typing import Any
 
 from lvws_ros.errors import LaunchError, WorldStuck
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
+from lvws_ros.ros.dashboard import DEFAULT_PORT
+from lvws_ros.ros.dashboard import add_arguments as dashboard_arguments
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
@@ -107,7 +109,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
                      config=args.config or "", bag_dir=args.bag_dir, out_dir=args.out_dir, name=args.name,
                      params_file=args.params_file, gif=not args.no_gif, timeout=args.timeout,
                      sync=not args.no_sync, namespace=args.namespace, domain_id=args.domain_id,
-                     events=args.events)
+                     events=args.events, dashboard=args.dashboard)
     except LaunchError as exc:
         print(f"lvws launch: failed: {exc}", file=sys.stderr)
         return 1
@@ -158,6 +160,12 @@ def cmd_verify(args: argparse.Namespace) -> int:
     return 0 if not bad else 1
 
 
+def cmd_dashboard(args: argparse.Namespace) -> int:
+    from lvws_ros.ros.dashboard import run
+
+    return run(args)
+
+
 def cmd_reindex(args: argparse.Namespace) -> int:
     from lvws_ros.ros.bag import reindex
 
@@ -198,7 +206,7 @@ def add_parsers(add: Adder) -> None:
 
     p = add("launch", cmd_launch, "the case study on ROS 2: cell_sim + scheduler + recorder, then a summary")
     p.add_argument("--policy", choices=POLICY_NAMES, default=None,
-                   help="scheduling policy (default: the --params-file's, else lvws)")
+                   help="scheduling policy (default: the --params-file's, else auto)")
     p.add_argument("--seed", type=int, default=None, help="policy seed (default: the --params-file's, else 0)")
     p.add_argument("--model", default=None, help="lvws/dbgm checkpoint (default: the shipped one)")
     p.add_argument("--rate", type=float, default=20.0, help="sim time / wall time")
@@ -219,6 +227,8 @@ def add_parsers(add: Adder) -> None:
 
     p.add_argument("--events", default=None, help="scripted world events (YAML: at t, submit / cancel / fail / "
                                                    "repair); see lvws_ros/sim/events.py")
+    p.add_argument("--dashboard", type=int, nargs="?", const=DEFAULT_PORT, default=None, metavar="PORT",
+                   help=f"serve the run's web dashboard on 127.0.0.1:PORT while it lasts (default port {DEFAULT_PORT})")
 
     for name, help_text in (
             ("submit", "add tasks to a running cell (cell_sim's submit_tasks service)"),
@@ -243,6 +253,9 @@ def add_parsers(add: Adder) -> None:
     p = add("report", cmd_report, "makespan, assignments and a Gantt chart of a recorded run, from the bag alone")
     p.add_argument("bag")
     p.add_argument("--gantt", default=None, help="PNG path (default: next to the bag)")
+
+    p = add("dashboard", cmd_dashboard, "the operator's web page of a cell: live over DDS, or a bag (--bag)")
+    dashboard_arguments(p)
 
     p = add("verify", cmd_verify, "re-run the scheduler offline on a bag's inputs; exit 0 when it decides the same")
     p.add_argument("bag")

@@ -90,8 +90,9 @@ def _tail(path: Path, lines: int = 15) -> str:
 
 def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: str, rate: float, config: str,
               file_params: dict[str, Any], summary: Path, gif: Path | None, sync: bool,
-              namespace: str = "", events: str | None = None) -> dict[str, list[str]]:
-    """The three children's command lines, recorder first, simulator last."""
+              namespace: str = "", events: str | None = None, dashboard: int | None = None) -> dict[str, list[str]]:
+    """The children's command lines, recorder first, simulator last (the dashboard, when
+    asked for, before the simulator)."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
 
     # one precedence, applied here: explicit arguments > the parameter file (its values for
@@ -111,12 +112,16 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
     if events:
         sim_params += ["-p", f"events:={Path(events).resolve()}"]
     ns = ["-r", f"__ns:={namespace}", *CLOCK_REMAP] if namespace else []
-    return {
+    out = {
         "recorder": [sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag), "--ros-args", *ns,
                      "-p", "use_sim_time:=true"],
         "scheduler": [sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args", *ns, *sched_params],
-        "cell_sim": [sys.executable, "-m", "lvws_ros.ros.cell_sim_node", "--ros-args", *ns, *sim_params],
     }
+    if dashboard is not None:
+        out["dashboard"] = [sys.executable, "-m", "lvws_ros.ros.dashboard", "--port", str(dashboard),
+                            *(["--namespace", namespace] if namespace else [])]
+    out["cell_sim"] = [sys.executable, "-m", "lvws_ros.ros.cell_sim_node", "--ros-args", *ns, *sim_params]
+    return out
 
 
 def _param(value: object) -> str:
@@ -187,6 +192,8 @@ def _start(commands: dict[str, list[str]], env: dict[str, str], out: Path, child
         tmp.replace(out / "pids.json")  # atomic: readers never see half a file
         if cname == "recorder":
             _wait_for_line(children[-1], "recording to", 60.0, interrupted)
+        if cname == "dashboard":
+            _wait_for_line(children[-1], "dashboard: http", 60.0, interrupted)
 
 
 PROGRESS_EVERY = 3.0  # wall seconds between progress lines
@@ -229,14 +236,17 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
            config: str = "", bag_dir: str | Path = "bags", out_dir: str | Path = "out", name: str | None = None,
            params_file: str | None = None, gif: bool = True, timeout: float = 600.0,
            domain_id: int | None = None, sync: bool = True, namespace: str = "", events: str | None = None,
-           log: Any = print) -> LaunchResult:
+           dashboard: int | None = None, log: Any = print) -> LaunchResult:
     """Run the case study end to end; raises LaunchError (children stopped) on failure.
     The configuration, the parameter file, the policy, the model and the namespace are
     checked before any process starts (ConfigError / PolicyError). ``policy``/``seed``
-    None: the parameter file's, else the scheduler's defaults."""
+    None: the parameter file's, else the scheduler's defaults. ``dashboard``: also serve the
+    web dashboard of the run on this port (127.0.0.1) while it lasts."""
+    from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
+
     namespace = check_namespace(namespace)
     in_file = _check_inputs(policy, model_path, config, params_file, events, namespace)
-    label = policy or str(in_file.get("policy", "lvws"))
+    label = policy or str(in_file.get("policy", DEFAULT_POLICY))
     cell = f"{namespace.strip('/').replace('/', '-')}-" if namespace else ""
     run = name or time.strftime(f"case-study-{cell}{label}-%Y%m%d-%H%M%S")
     bag = Path(bag_dir) / run
@@ -248,7 +258,7 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     gif_path = out / "run.gif"
     commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
                          file_params=in_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
-                         namespace=namespace, events=events)
+                         namespace=namespace, events=events, dashboard=dashboard)
     children: list[Child] = []
     interrupted: list[int] = []
 
@@ -261,6 +271,8 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
         env = _child_env(domain_id)
         _start(commands, env, out, children, interrupted)
         log(f"running {run}{' in ' + namespace if namespace else ''} (domain {env['ROS_DOMAIN_ID']}); logs in {out}")
+        if dashboard is not None:
+            log(f"dashboard: http://127.0.0.1:{dashboard}/ (while the run lasts)")
         _supervise(children, timeout, t0, interrupted, log)
     except BaseException:
         codes = stop(children)

@@ -8,6 +8,12 @@ whenever a robot becomes available or a task becomes ready. Names are relative
 (:mod:`lvws_ros.ros.convert`), the core, publish. Health goes to ``diagnostics`` once a
 second and on every event, with the node's fully qualified name as ``hardware_id``.
 
+A decision is computed on a worker thread beside the node's callbacks: messages, parameter
+changes and diagnostics are served while a search policy (``auto``, ``lvws_sample``, ...)
+spends its budget. What arrives meanwhile is applied, in order, as soon as the decision is
+published (a guard condition hands it back to the executor's thread, where everything
+else runs), so the core never sees a snapshot change in the middle of a decision.
+
 Parameters (PARAMETERS: type, default, description, range; ``ros2 param describe``
 shows them): policy, fallback_policy, model_path, seed, decision_budget_ms, beam_width,
 samples and ack_timeout may change at runtime: the on-set callback builds the new policies and
@@ -25,6 +31,7 @@ import sys
 import time
 import traceback
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,11 +41,11 @@ from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
 from lvws_ros.core.executor import Policy
-from lvws_ros.core.online import OnlineScheduler
+from lvws_ros.core.online import OnlineDecision, OnlineScheduler
 from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES, make_policy
 from lvws_ros.ros import convert, topics
@@ -50,10 +57,10 @@ DESCRIPTION = (
     "(lvws_msgs/AssignmentArray) at every decision step, health on diagnostics; names are relative to the "
     "node's namespace. ROS parameters: " + ", ".join(
         ["policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "ack_timeout",
-         "expect_subscribers", "use_sim_time"])
+         "expect_subscribers", "managed", "use_sim_time"])
     + " (--ros-args -p NAME:=VALUE or --params-file config/scheduler.yaml)."
 )
-DEFAULT_POLICY = "lvws"
+DEFAULT_POLICY = "auto"
 
 
 @dataclass(frozen=True)
@@ -104,6 +111,9 @@ PARAMETERS: dict[str, Param] = {
                          0.01, 3600.0),
     "expect_subscribers": Param(int, 0, "the first decision waits (at most 20 s) until this many nodes subscribe "
                                         "to lvws/assignments", 0, 1000, read_only=True),
+    "managed": Param(bool, False, "a managed lifecycle node: configure loads the policies and the model, activate "
+                                  "starts deciding and publishing, deactivate stops, cleanup frees; false: it "
+                                  "configures and activates itself at start", read_only=True),
     "use_sim_time": Param(bool, False, "rclpy's: the node's clock follows /clock"),
 }
 RUNTIME_POLICY_PARAMETERS = ("policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "beam_width",
@@ -187,7 +197,13 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
             make_policy(fallback, seed=int(values["seed"]), **backup) if fallback else None)
 
 
-class SchedulerNode(Node):
+class SchedulerNode(LifecycleNode):
+    """The scheduler, a lifecycle node. Unmanaged (``managed`` false, the default) it
+    configures and activates itself at start; managed, it waits for a lifecycle manager
+    (``lifecycle_msgs`` services ``change_state`` and ``get_state`` under the node's name).
+    Inactive, it keeps taking team and graph messages (the latest are replayed into a new
+    core at configure) but decides and publishes nothing."""
+
     def __init__(self) -> None:
         super().__init__("scheduler")
         for name, par in PARAMETERS.items():
@@ -209,8 +225,13 @@ class SchedulerNode(Node):
         # the world) subscribe to lvws/assignments, so none of them misses it
         self.expect_subscribers = int(values["expect_subscribers"])
         self.started_at = time.monotonic()
-        policy, fallback = build_policies(values)
-        self.core = OnlineScheduler(policy, float(values["ack_timeout"]), fallback=fallback)
+        self.core: OnlineScheduler | None = None  # made at configure, freed at cleanup
+        self.active = False  # between activate and deactivate: deciding and publishing
+        self.latest: dict[str, Callable[[], None]] = {}  # the latest message of each kind, for a new core
+        self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="decide")
+        self.in_flight: Future[OnlineDecision | None] | None = None  # the decision being computed
+        self.deferred: list[Callable[[], None]] = []  # what arrived meanwhile, applied after it
+        self.decided = self.create_guard_condition(lambda: self.guarded(self.on_decided))
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.pub = self.create_publisher(AssignmentArray, topics.ASSIGNMENTS_TOPIC, topics.ASSIGNMENTS_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, topics.DIAGNOSTICS_QOS)
@@ -225,6 +246,25 @@ class SchedulerNode(Node):
         self.rejected: dict[str, str] = {}  # message kind -> why its latest one was ignored
         self.last_latency = 0.0
         self.received = 0
+        if not values["managed"]:
+            self.trigger_configure()
+            if self.core is None:
+                raise LvwsError(self.error)
+            self.trigger_activate()
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Load the policies and the model; the latest messages go to the new core."""
+        values = self.values()
+        try:
+            policy, fallback = build_policies(values)
+        except LvwsError as exc:
+            self.error = str(exc)
+            self.get_logger().error(f"configure failed: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        self.error = ""
+        self.core = OnlineScheduler(policy, float(values["ack_timeout"]), fallback=fallback)
+        for offer in list(self.latest.values()):
+            offer()
         self.get_logger().info(f"policy {self.policy_name}, seed {self.seed}, model {values['model_path'] or 'shipped'}"
                                f", fallback {values['fallback_policy'] or 'none'}; topics under "
                                f"{self.get_namespace()}")
@@ -232,6 +272,31 @@ class SchedulerNode(Node):
         # them keeps a full garbage collection from pausing a decision (100 x 500: p99 of the
         # decision latency 48 -> 37 ms, docs/scale.md).
         gc.freeze()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = True
+        self.report(DiagnosticStatus.OK, "active: deciding")
+        self.when_idle(lambda: self.guarded(self.maybe_step))
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = False  # a decision in flight is not published
+        self.report(DiagnosticStatus.OK, "inactive: not deciding")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.when_idle(self.free)
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = False
+        return TransitionCallbackReturn.SUCCESS
+
+    def free(self) -> None:
+        """Drop the core with its policies and model (cleanup)."""
+        self.core = None
+        gc.collect()
 
     def values(self, changes: list[Parameter] | None = None) -> dict[str, Any]:
         """The node's parameter values, with ``changes`` applied."""
@@ -251,24 +316,44 @@ class SchedulerNode(Node):
         if names & set(RUNTIME_POLICY_PARAMETERS):
             try:
                 policy, fallback = build_policies(values)
-                if self.core.team is not None and self.core.graph is not None and fallback is None:
-                    policy.reset(self.core.instance())  # no fallback: the new policy must serve this cell
+                core = self.core
+                if core is not None and core.team is not None and core.graph is not None and fallback is None:
+                    policy.reset(core.instance())  # no fallback: the new policy must serve this cell
             except Exception as exc:  # a model that does not load, a policy that cannot serve the cell
                 return SetParametersResult(successful=False, reason=f"{type(exc).__name__}: {exc}")
-            self.core.set_policies(policy, fallback)
+            self.when_idle(lambda: self.core.set_policies(policy, fallback) if self.core is not None else None)
             self.policy_name, self.seed = str(values["policy"]), int(values["seed"])
             self.report(DiagnosticStatus.OK,
                         f"parameters {', '.join(sorted(names))} changed: policy {self.policy_name}, fallback "
                         f"{values['fallback_policy'] or 'none'}")
-        if "ack_timeout" in names:
+        if "ack_timeout" in names and self.core is not None:
             self.core.ack_timeout = float(values["ack_timeout"])
         return SetParametersResult(successful=True)
 
     def on_team(self, msg: TeamState) -> None:
-        self.guarded(lambda: self.offer("TeamState", lambda: self.core.offer_team(convert.team_from_msg(msg))))
+        self.received += 1
+        self.take("TeamState", lambda core: core.offer_team(convert.team_from_msg(msg)))
 
     def on_graph(self, msg: TaskGraph) -> None:
-        self.guarded(lambda: self.offer("TaskGraph", lambda: self.core.offer_graph(convert.graph_from_msg(msg))))
+        self.received += 1
+        self.take("TaskGraph", lambda core: core.offer_graph(convert.graph_from_msg(msg)))
+
+    def take(self, kind: str, offer: Callable[[OnlineScheduler], bool]) -> None:
+        """Offer a message to the core (once it is configured and idle); kept as the
+        latest of its kind for a core made later."""
+        def work() -> None:
+            if self.core is not None:
+                core = self.core
+                self.guarded(lambda: self.offer(kind, lambda: offer(core)))
+        self.latest[kind] = lambda: self.when_idle(work)
+        self.when_idle(work)
+
+    def when_idle(self, work: Callable[[], None]) -> None:
+        """Do ``work`` now, or after the decision in flight (the core is the worker's then)."""
+        if self.in_flight is None:
+            work()
+        else:
+            self.deferred.append(work)
 
     def guarded(self, work: Callable[[], None]) -> None:
         """No message content may stop the node: a bug is logged with its traceback and
@@ -282,7 +367,6 @@ class SchedulerNode(Node):
 
     def offer(self, kind: str, take: Callable[[], bool]) -> None:
         """Hand a snapshot to the core; a malformed one is reported (ERROR) and ignored."""
-        self.received += 1
         try:
             taken = take()
         except LvwsError as exc:
@@ -297,6 +381,8 @@ class SchedulerNode(Node):
     def maybe_step(self) -> None:
         """Decide when team and graph describe the same instant; a publisher that
         never stamps them alike is served after SETTLE_SECONDS."""
+        if self.core is None or not self.active:
+            return
         team, graph = self.core.team, self.core.graph
         if team is not None and graph is not None and abs(team.stamp - graph.stamp) < 1e-9:
             self.unsynced_since = None
@@ -305,29 +391,54 @@ class SchedulerNode(Node):
             self.unsynced_since = time.monotonic()
 
     def on_settle(self) -> None:
-        if self.unsynced_since is not None and time.monotonic() - self.unsynced_since > SETTLE_SECONDS:
+        if self.in_flight is None and self.unsynced_since is not None \
+                and time.monotonic() - self.unsynced_since > SETTLE_SECONDS:
             self.unsynced_since = None
             self.guarded(self.step)
 
     def audience_ready(self) -> bool:
         """Whether the expected subscribers of lvws/assignments are there (or the wait is over)."""
-        if self.core.step > 0 or self.pub.get_subscription_count() >= self.expect_subscribers:
+        if (self.core is not None and self.core.step > 0) \
+                or self.pub.get_subscription_count() >= self.expect_subscribers:
             return True
         return time.monotonic() - self.started_at > SUBSCRIBER_WAIT
 
     def step(self) -> None:
+        """Start a decision on the worker thread (:meth:`on_decided` publishes it)."""
         if not self.audience_ready():
             self.unsynced_since = time.monotonic()  # on_settle tries again
             return
+        if self.core is None or not self.active:
+            return
+        if self.in_flight is not None:  # after the one in flight, with what arrived meanwhile
+            self.deferred.append(self.maybe_step)
+            return
+        self.in_flight = self.worker.submit(self.core.decide)
+        self.in_flight.add_done_callback(lambda _done: self.decided.trigger())
+
+    def on_decided(self) -> None:
+        """The decision is made: publish it, then apply what arrived meanwhile, in order."""
+        done, self.in_flight = self.in_flight, None
+        if done is None or not done.done():
+            self.in_flight = done
+            return
         try:
-            decision = self.core.decide()
+            self.publish_decision(done)
+        finally:
+            work, self.deferred = self.deferred, []
+            for item in work:
+                self.when_idle(item)
+
+    def publish_decision(self, done: Future[OnlineDecision | None]) -> None:
+        try:
+            decision = done.result()
         except LvwsError as exc:
             self.error = f"{type(exc).__name__}: {exc}"
             self.report(DiagnosticStatus.ERROR, self.error)
             return
         self.error = ""
         self.flush_notices()
-        if decision is None:
+        if decision is None or not self.active:  # deactivated meanwhile: nothing goes out
             return
         self.last_latency = decision.latency
         # never stamped before the inputs it answers (a sim clock may lag the state)
@@ -341,10 +452,11 @@ class SchedulerNode(Node):
         """The world's changes (tasks added or cancelled, robots back) as OK, the core's
         notices (robots gone, tasks interrupted, world restarts, released assignments,
         untrusted readiness) as WARN."""
-        while self.core.changes:
-            self.report(DiagnosticStatus.OK, self.core.changes.pop(0))
-        while self.core.notices:
-            self.report(DiagnosticStatus.WARN, self.core.notices.pop(0))
+        core = self.core
+        while core is not None and core.changes:
+            self.report(DiagnosticStatus.OK, core.changes.pop(0))
+        while core is not None and core.notices:
+            self.report(DiagnosticStatus.WARN, core.notices.pop(0))
 
     def report(self, level: bytes, message: str) -> None:
         """Log and publish one diagnostics status now (besides the periodic one)."""
@@ -362,16 +474,24 @@ class SchedulerNode(Node):
         status = DiagnosticStatus(name="lvws_scheduler", hardware_id=self.get_fully_qualified_name())
         problem = self.error or "; ".join(f"{k} ignored: {v}" for k, v in sorted(self.rejected.items()))
         status.level = level if level is not None else (DiagnosticStatus.ERROR if problem else DiagnosticStatus.OK)
-        status.message = message or problem or ("waiting for team and task graph" if self.core.team is None
-                                                or self.core.graph is None else "ok")
+        core = self.core
+        idle = "unconfigured" if core is None else "inactive" if not self.active else \
+            "waiting for team and task graph" if core.team is None or core.graph is None else "ok"
+        status.message = message or problem or idle
         status.values = [KeyValue(key=k, value=str(v)) for k, v in (
-            ("policy", self.policy_name), ("seed", self.seed), ("decisions", self.core.step),
+            ("policy", self.policy_name), ("seed", self.seed), ("decisions", core.step if core else 0),
             ("last_latency_ms", f"{1000 * self.last_latency:.3f}"), ("messages", self.received),
-            ("out_of_order_dropped", self.core.dropped), ("world_restarts", self.core.restarts),
-            ("pending", len(self.core.pending)), ("fallback_steps", self.core.fallbacks))]
+            ("out_of_order_dropped", core.dropped if core else 0), ("world_restarts", core.restarts if core else 0),
+            ("pending", len(core.pending) if core else 0), ("fallback_steps", core.fallbacks if core else 0),
+            ("lifecycle", "active" if self.active else "inactive" if core is not None else "unconfigured"))]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)
+
+
+    def destroy_node(self) -> None:
+        self.worker.shutdown(wait=True, cancel_futures=True)  # a decision in flight ends first
+        super().destroy_node()
 
 
 def main(argv: list[str] | None = None) -> int:

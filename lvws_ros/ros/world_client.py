@@ -17,7 +17,7 @@ from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.ros.convert import cell_task_to_msg
 from lvws_ros.sim.config import read_yaml
 
-__all__ = ["SERVICES", "call_world", "tasks_from_file"]
+__all__ = ["SERVICES", "call_world", "tasks_from_file", "world_request"]
 
 SERVICES = {"submit": "submit_tasks", "cancel": "cancel_task", "fault": "set_robot_fault"}
 
@@ -33,6 +33,20 @@ def tasks_from_file(path: str | Path) -> list[dict[str, Any]]:
     return items
 
 
+def world_request(kind: str, *, tasks: Sequence[dict[str, Any]] = (), target: str = "",
+                  failed: bool = True) -> tuple[Any, Any]:
+    """(service type, request) of one of the simulator's services (LvwsError: unknown kind)."""
+    from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitTasks
+
+    if kind == "submit":
+        return SubmitTasks, SubmitTasks.Request(tasks=[cell_task_to_msg(t, k) for k, t in enumerate(tasks)])
+    if kind == "cancel":
+        return CancelTask, CancelTask.Request(task_id=target)
+    if kind == "fault":
+        return SetRobotFault, SetRobotFault.Request(robot_id=target, failed=failed)
+    raise LvwsError(f"unknown world change {kind!r}; one of {', '.join(SERVICES)}")
+
+
 def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]] = (), target: str = "",
                failed: bool = True, domain_id: int | None = None, timeout: float = 20.0) -> tuple[bool, str]:
     """Call one of the simulator's services and return (accepted, message); LvwsError when
@@ -41,17 +55,8 @@ def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]
         os.environ["ROS_DOMAIN_ID"] = str(domain_id)
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # what lvws launch uses
     import rclpy
-    from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitTasks
 
-    if kind == "submit":
-        srv: Any = SubmitTasks
-        request = SubmitTasks.Request(tasks=[cell_task_to_msg(t, k) for k, t in enumerate(tasks)])
-    elif kind == "cancel":
-        srv, request = CancelTask, CancelTask.Request(task_id=target)
-    elif kind == "fault":
-        srv, request = SetRobotFault, SetRobotFault.Request(robot_id=target, failed=failed)
-    else:
-        raise LvwsError(f"unknown world change {kind!r}; one of {', '.join(SERVICES)}")
+    srv, request = world_request(kind, tasks=tasks, target=target, failed=failed)
     rclpy.init(args=["lvws_world_client"])
     try:
         node = rclpy.create_node("lvws_world_client", namespace=namespace or None)

@@ -206,7 +206,7 @@ def _graph(stamp: int) -> TaskGraph:
 
 def test_the_scheduler_node_obeys_capability_payload_and_availability(ros_context, tmp_path):
     params = tmp_path / "scheduler.yaml"
-    params.write_text((REPO / "config" / "scheduler.yaml").read_text().replace("policy: lvws", "policy: dbgm"))
+    params.write_text((REPO / "config" / "scheduler.yaml").read_text().replace("policy: auto", "policy: dbgm"))
     proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args",
                              "--params-file", str(params), "-p", "seed:=3"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

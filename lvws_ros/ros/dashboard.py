@@ -1,0 +1,429 @@
+"""The operator's web page: ``lvws dashboard`` (a live cell over DDS, or a bag with a time slider).
+
+One page, served on 127.0.0.1 by Starlette under uvicorn, charts drawn by plotly.js (served
+from the ``plotly`` wheel), updated over a websocket twice a second:
+
+* the Gantt chart, executed against planned (a decision's start plus the task's duration),
+  the robots told to wait marked, subteams labelled with their size;
+* the task graph, each task coloured by its status, the critical path of what is left
+  (longest by duration) drawn thick;
+* each robot's state (a table) and the cell picture: sites and robots at their poses;
+* diagnostics and the decision latency per step;
+* live: buttons for the simulator's services (submit tasks from a YAML file, cancel a
+  task, fail or repair a robot), with the service's answer shown.
+
+:class:`CellView` turns what the cell published (team and graph snapshots, decisions,
+diagnostics) into the page's JSON; it is the same for a live cell (:class:`LiveFeed`, an
+rclpy node in its namespace) and for a bag (:func:`~lvws_ros.ros.bag.read_run`). The page
+reads nothing but that JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import os
+import sys
+import tempfile
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lvws_ros.core.executor import TaskStatus
+from lvws_ros.core.online import GraphSnapshot, OnlineDecision, TeamSnapshot
+from lvws_ros.errors import LvwsError
+
+DEFAULT_PORT = 8080
+PUSH_SECONDS = 0.5  # the page is sent a new view this often
+KEPT_DIAGNOSTICS = 200  # the latest statuses shown (and kept, live)
+
+__all__ = ["DEFAULT_PORT", "CellView", "LiveFeed", "main", "make_app"]
+
+STATUS_NAMES = {int(s): s.name.lower() for s in TaskStatus}
+
+
+@dataclass
+class CellView:
+    """What the page shows, from the cell's messages in the order they came."""
+
+    teams: list[TeamSnapshot] = field(default_factory=list)
+    graphs: list[GraphSnapshot] = field(default_factory=list)
+    decisions: list[OnlineDecision] = field(default_factory=list)
+    diagnostics: list[dict[str, str]] = field(default_factory=list)
+    namespace: str = "/"
+    source: str = "live"  # "live" or the bag's path
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    @classmethod
+    def from_bag(cls, path: str | Path) -> CellView:
+        from lvws_ros.ros.bag import read_run
+
+        run = read_run(path)
+        return cls(run.teams, run.graphs, run.decisions, run.diagnostics, run.namespace, str(run.path))
+
+    def end_time(self) -> float:
+        stamps = [s.stamp for s in self.teams] + [s.stamp for s in self.graphs] + [_when(d) for d in self.decisions]
+        return max(stamps, default=0.0)
+
+    def view(self, at: float | None = None) -> dict[str, Any]:
+        """The page's JSON at sim time ``at`` (None: the latest)."""
+        with self.lock:
+            t = self.end_time() if at is None else at
+            team = _latest(self.teams, t)
+            graph = _latest(self.graphs, t)
+            decisions = [d for d in self.decisions if _when(d) <= t + 1e-9]
+            # at a chosen time (a bag's slider): the statuses sent before its next decision
+            diags = list(self.diagnostics) if at is None else \
+                [d for d in self.diagnostics if _count(d.get("decisions")) <= len(decisions)]
+            return {
+                "source": self.source, "namespace": self.namespace, "time": t, "end": self.end_time(),
+                "gantt": _gantt(graph, decisions, t), "waits": _waits(decisions),
+                "graph": _task_graph(graph), "robots": _robots(team), "cell": _cell(team, graph),
+                "diagnostics": diags[-KEPT_DIAGNOSTICS:], "latency": _latency(diags),
+                "tasks": [] if graph is None else [{"id": x.id, "status": STATUS_NAMES.get(x.status, "?")}
+                                                    for x in graph.tasks],
+            }
+
+
+def _when(d: OnlineDecision) -> float:
+    """The sim time a decision answers (the state it was made in)."""
+    return max(d.team_stamp, d.graph_stamp)
+
+
+def _count(value: str | None) -> int:
+    try:
+        return int(value or 0)
+    except ValueError:
+        return 0
+
+
+def _latest(snaps: list[Any], t: float) -> Any:
+    out = None
+    for s in snaps:
+        if s.stamp <= t + 1e-9:
+            out = s
+    return out
+
+
+def _gantt(graph: GraphSnapshot | None, decisions: list[OnlineDecision], now: float) -> list[dict[str, Any]]:
+    """Bars: executed (a task's start to its end, or to now while it runs) and planned (the
+    decision that assigned it, plus its duration), one per robot of its subteam."""
+    bars: list[dict[str, Any]] = []
+    if graph is None:
+        return bars
+    duration = {x.id: x.duration for x in graph.tasks}
+    for x in graph.tasks:
+        if x.start is None or not x.assigned_robots:
+            continue
+        end = x.end if x.end is not None else max(now, x.start)
+        for r in x.assigned_robots:
+            bars.append({"robot": r, "task": x.id, "start": x.start, "end": end, "kind": "executed",
+                         "running": x.end is None, "team": len(x.assigned_robots)})
+    for d in decisions:
+        for task, robots in d.assignments:
+            if task in duration:
+                for r in robots:
+                    bars.append({"robot": r, "task": task, "start": _when(d), "end": _when(d) + duration[task],
+                                 "kind": "planned", "running": False, "team": len(robots)})
+    return bars
+
+
+def _waits(decisions: list[OnlineDecision]) -> list[dict[str, Any]]:
+    return [{"robot": r, "time": _when(d), "step": d.step} for d in decisions for r in d.waiting]
+
+
+def _task_graph(graph: GraphSnapshot | None) -> dict[str, Any]:
+    """Nodes in layers (longest chain of prerequisites before each), edges, and the critical
+    path of the tasks not done (the longest chain by duration)."""
+    if graph is None:
+        return {"nodes": [], "edges": [], "critical": []}
+    tasks = {x.id: x for x in graph.tasks}
+    order: list[str] = []
+    seen: set[str] = set()
+
+    def visit(k: str) -> None:  # depth-first topological order (the graph is acyclic: checked on arrival)
+        stack = [(k, iter(tasks[k].prerequisites))]
+        seen.add(k)
+        while stack:
+            node, it = stack[-1]
+            nxt = next((p for p in it if p in tasks and p not in seen), None)
+            if nxt is None:
+                order.append(node)
+                stack.pop()
+            else:
+                seen.add(nxt)
+                stack.append((nxt, iter(tasks[nxt].prerequisites)))
+
+    for name in tasks:
+        if name not in seen:
+            visit(name)
+    layer: dict[str, int] = {}
+    longest: dict[str, float] = {}  # the longest chain of tasks not done ending with each
+    before: dict[str, str | None] = {}
+    for k in order:
+        pre = [p for p in tasks[k].prerequisites if p in tasks]
+        layer[k] = 1 + max((layer[p] for p in pre), default=-1)
+        left = tasks[k].duration if tasks[k].status != TaskStatus.DONE else 0.0
+        best = max(pre, key=lambda p: longest[p], default=None)
+        longest[k] = left + (longest[best] if best is not None else 0.0)
+        before[k] = best
+    critical: list[str] = []
+    if longest and max(longest.values()) > 0:
+        last: str | None = max(longest, key=lambda n: longest[n])
+        while last is not None and longest[last] > 0:
+            critical.append(last)
+            last = before[last]
+    rows: dict[int, int] = {}
+    nodes = []
+    for k in order:
+        y = rows.get(layer[k], 0)
+        rows[layer[k]] = y + 1
+        nodes.append({"id": k, "x": layer[k], "y": y, "status": STATUS_NAMES.get(tasks[k].status, "?"),
+                      "robots": list(tasks[k].assigned_robots)})
+    edges = [[p, k] for k in order for p in tasks[k].prerequisites if p in tasks]
+    return {"nodes": nodes, "edges": edges, "critical": critical[::-1]}
+
+
+def _robots(team: TeamSnapshot | None) -> list[dict[str, Any]]:
+    if team is None:
+        return []
+    return [{"id": r.id, "kind": r.kind, "available": r.available, "task": r.current_task,
+             "busy_for": round(r.busy_for, 2), "site": r.site, "x": r.pose[0], "y": r.pose[1]} for r in team.robots]
+
+
+def _cell(team: TeamSnapshot | None, graph: GraphSnapshot | None) -> dict[str, Any]:
+    sites = [] if graph is None else [{"name": n, "x": x, "y": y} for n, x, y in graph.sites]
+    robots = [] if team is None else [{"id": r.id, "x": r.pose[0], "y": r.pose[1], "busy": not r.available}
+                                      for r in team.robots]
+    return {"sites": sites, "robots": robots}
+
+
+def _latency(diags: list[dict[str, str]]) -> list[dict[str, float]]:
+    out: dict[int, float] = {}
+    for d in diags:
+        try:
+            step, ms = int(d["decisions"]), float(d["last_latency_ms"])
+        except (KeyError, ValueError):
+            continue
+        if step > 0 and math.isfinite(ms):
+            out[step] = ms
+    return [{"step": k, "ms": v} for k, v in sorted(out.items())]
+
+
+class LiveFeed:
+    """An rclpy node in the cell's namespace feeding a :class:`CellView`, and the
+    simulator's service clients; spins on its own thread."""
+
+    def __init__(self, view: CellView, namespace: str = "") -> None:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
+        from rclpy.executors import SingleThreadedExecutor
+
+        from lvws_ros.ros import convert, topics
+
+        if not rclpy.ok():
+            rclpy.init(args=["lvws_dashboard"])
+        self.view = view
+        self.node = rclpy.create_node("lvws_dashboard", namespace=namespace or None)
+        view.namespace = self.node.get_namespace()
+
+        def add(kind: str, convert_msg: Callable[[Any], Any]) -> Callable[[Any], None]:
+            def take(msg: Any) -> None:
+                item = convert_msg(msg)
+                with view.lock:
+                    getattr(view, kind).append(item)
+            return take
+
+        def diagnostics(msg: Any) -> None:
+            with view.lock:
+                for s in msg.status:
+                    view.diagnostics.append({"name": s.name, "level": str(s.level), "message": s.message,
+                                             "hardware_id": s.hardware_id, **{kv.key: kv.value for kv in s.values}})
+                del view.diagnostics[:-KEPT_DIAGNOSTICS]
+
+        n = self.node
+        n.create_subscription(TeamState, topics.TEAM_TOPIC, add("teams", convert.team_from_msg), topics.TEAM_QOS)
+        n.create_subscription(TaskGraph, topics.GRAPH_TOPIC, add("graphs", convert.graph_from_msg), topics.GRAPH_QOS)
+        n.create_subscription(AssignmentArray, topics.ASSIGNMENTS_TOPIC, add("decisions", convert.decision_from_msg),
+                              topics.ASSIGNMENTS_QOS)
+        n.create_subscription(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, diagnostics, topics.DIAGNOSTICS_QOS)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(n)
+        self.thread = threading.Thread(target=self._spin, name="dashboard-ros", daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        try:
+            self.executor.spin()
+        except ExternalShutdownException:
+            pass
+
+    def call(self, kind: str, *, tasks: list[dict[str, Any]] | None = None, target: str = "",
+             failed: bool = True, timeout: float = 10.0) -> tuple[bool, str]:
+        """One of the simulator's services; (accepted, its message)."""
+        from lvws_ros.ros.world_client import SERVICES, world_request
+
+        srv, request = world_request(kind, tasks=tasks or [], target=target, failed=failed)
+        client = self.node.create_client(srv, SERVICES[kind])
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                return False, f"no simulator answers on {client.srv_name}"
+            done = threading.Event()
+            future = client.call_async(request)
+            future.add_done_callback(lambda _f: done.set())
+            if not done.wait(timeout):
+                return False, f"{client.srv_name}: no answer within {timeout:g} s"
+            res = future.result()
+            return bool(res.success), str(res.message)
+        finally:
+            self.node.destroy_client(client)
+
+    def close(self) -> None:
+        import rclpy
+
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown()
+
+
+PAGE = Path(__file__).with_name("dashboard.html")
+
+
+def make_app(view: CellView, feed: LiveFeed | None = None) -> Any:
+    """The Starlette app: the page, plotly.js, the view as JSON (``/view?t=``), a websocket
+    pushing it (``/ws``), and, live, ``POST /world`` for the simulator's services."""
+    import plotly
+    from starlette.applications import Starlette
+    from starlette.requests import Request
+    from starlette.responses import FileResponse, HTMLResponse, JSONResponse
+    from starlette.routing import Route, WebSocketRoute
+    from starlette.websockets import WebSocket, WebSocketDisconnect
+
+    plotly_js = Path(plotly.__file__).parent / "package_data" / "plotly.min.js"
+
+    async def page(_request: Request) -> HTMLResponse:
+        return HTMLResponse(PAGE.read_text(encoding="utf-8"))
+
+    async def script(_request: Request) -> FileResponse:
+        return FileResponse(plotly_js, media_type="application/javascript")
+
+    def at(value: str | None) -> float | None:
+        try:
+            t = float(value) if value not in (None, "") else None
+        except ValueError:
+            return None
+        return t if t is None or math.isfinite(t) else None
+
+    async def view_json(request: Request) -> JSONResponse:
+        return JSONResponse(view.view(at(request.query_params.get("t"))))
+
+    async def ws(socket: WebSocket) -> None:
+        await socket.accept()
+        t: float | None = None
+        try:
+            while True:
+                await socket.send_text(json.dumps(view.view(t)))
+                try:  # the page may pick a time (bag mode: the slider); else the latest
+                    msg = await asyncio.wait_for(socket.receive_text(), timeout=PUSH_SECONDS)
+                    t = at(json.loads(msg).get("t"))
+                except TimeoutError:
+                    pass
+        except (WebSocketDisconnect, RuntimeError):
+            return
+
+    async def world(request: Request) -> JSONResponse:
+        if feed is None:
+            return JSONResponse({"success": False, "message": "a recorded run: the world cannot be changed"})
+        try:
+            body = await request.json()
+            kind, target = str(body.get("kind", "")), str(body.get("target", ""))
+            tasks = None
+            if kind == "submit":
+                tasks = _tasks_from_text(str(body.get("text", "")), str(body.get("file", "tasks.yaml")))
+            if kind in ("fault", "repair"):
+                ok, message = await asyncio.to_thread(feed.call, "fault", target=target, failed=kind == "fault")
+            else:
+                ok, message = await asyncio.to_thread(feed.call, kind, tasks=tasks, target=target)
+        except (LvwsError, ValueError) as exc:
+            ok, message = False, str(exc)
+        return JSONResponse({"success": ok, "message": message})
+
+    return Starlette(routes=[Route("/", page), Route("/plotly.min.js", script), Route("/view", view_json),
+                             WebSocketRoute("/ws", ws), Route("/world", world, methods=["POST"])])
+
+
+def _tasks_from_text(text: str, name: str) -> list[dict[str, Any]]:
+    """Task entries from an uploaded YAML file's text (the rules of ``lvws submit``)."""
+    from lvws_ros.ros.world_client import tasks_from_file
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / Path(name).name
+        path.write_text(text, encoding="utf-8")
+        return tasks_from_file(path)
+
+
+def serve(view: CellView, feed: LiveFeed | None, host: str, port: int,
+          started: Callable[[str], None] = print) -> None:
+    """Serve the page until Ctrl-C (or the server stops)."""
+    import uvicorn
+
+    config = uvicorn.Config(make_app(view, feed), host=host, port=port, log_level="warning", lifespan="off")
+    server = uvicorn.Server(config)
+    started(f"dashboard: http://{host}:{port}/ ({view.source})")
+    server.run()
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="lvws dashboard", description="the operator's web page of a cell (live or a bag)")
+    add_arguments(p)
+    return p
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bag", default=None, help="show this recorded run (a time slider) instead of a live cell")
+    p.add_argument("--namespace", default="", help="the live cell's ROS namespace (e.g. /cellA)")
+    p.add_argument("--domain-id", type=int, default=None, help="the live cell's ROS_DOMAIN_ID")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT})")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
+
+
+def run(args: argparse.Namespace) -> int:
+    if not 0 < args.port < 65536:
+        raise LvwsError(f"--port must be in 1..65535, got {args.port}")
+    if args.bag:
+        serve(CellView.from_bag(args.bag), None, args.host, args.port)
+        return 0
+    if args.domain_id is not None:
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # what lvws launch uses
+    from lvws_ros.ros.launcher import check_namespace
+
+    view = CellView()
+    feed = LiveFeed(view, check_namespace(args.namespace))
+    try:
+        serve(view, feed, args.host, args.port)
+    finally:
+        feed.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        return run(args)
+    except LvwsError as exc:
+        sys.stderr.write(f"lvws dashboard: {exc}\n")
+        return 2
+    except KeyboardInterrupt:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
