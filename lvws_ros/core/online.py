@@ -557,6 +557,19 @@ class OnlineScheduler:
         self._seen_ready = ready - {t for t, _ in decision.assignments}
         return decision
 
+    def forget(self, decision: OnlineDecision) -> None:
+        """Undo :meth:`decide`'s bookkeeping for a decision that was never sent: its tasks
+        are not pending, and its robots and tasks are new to the next decision."""
+        for task, _robots in decision.assignments:
+            self.pending.pop(task, None)
+        self._seen_free, self._seen_ready = frozenset(), frozenset()
+
+    def pure_instance(self) -> Instance:
+        """The instance :meth:`instance` would give, built without touching the scheduler
+        (a policy can be checked against it while another thread decides)."""
+        assert self.team is not None and self.graph is not None
+        return build_instance(self.team, scheduling_view(self.team, self.graph)[0])
+
     def decide_state(self, state: State) -> OnlineDecision:
         """Run the policy on ``state`` (checked against Eqs. 8-11) and name the result."""
         inst = state.instance

@@ -9,6 +9,7 @@ plan to follow, ``auto``
    incumbent (for a cell of at most ``exact_tasks`` tasks still to do; a proof of
    optimality ends the search for the run) or, for a bigger cell without travel,
    large-neighbourhood search on the plan (:mod:`~lvws_ros.policies.lns`), then LVWS sampling
+   (only where LVWS's own quick plan finished within the budget: a sample costs as much)
    (:func:`~lvws_ros.learning.sampling.sample_schedules`) in rounds sized to the time left;
 3. follows the best plan (:class:`~lvws_ros.learning.search.FollowedPlan`, with the drift
    rule of :data:`~lvws_ros.core.executor.PLAN_DRIFT`); when the world departs from it (a
@@ -19,7 +20,10 @@ While it follows a plan not proven optimal, each later step spends its budget on
 same improvement from its own state, replacing the plan only by a shorter one: a plan
 never gets worse. With a budget of 0 it decides as its quick plan does; when not even a
 quick plan finishes within the budget (fleet scale), it takes GRP's decision for the
-step and counts it in ``fallbacks``. With a budget of 0 the quick plans are made however
+step and counts it in ``fallbacks``, and takes GRP's decisions at once (no quick plan
+tried) until half as many tasks are left, when it tries again: at fleet scale a run
+costs GRP's time and a few budgets, and is never longer than GRP's schedule (a quick plan
+found later holds GRP's own finish). With a budget of 0 the quick plans are made however
 long they take, and nothing more. Each step's compute stays within the budget plus
 at most one decision of LVWS or GRP and CP-SAT's overshoot of its time limit.
 """
@@ -55,6 +59,7 @@ from lvws_ros.policies.baselines import GreedyPayloadPolicy
 DEFAULT_BUDGET_MS = 1000.0
 EXACT_TASKS = 60  # CP-SAT improves plans of cells with at most this many tasks still to do
 EXACT_SHARE = 0.6  # of the time left that CP-SAT may take (the rest: sampling)
+FOLLOW_SECONDS_PER_TASK = 0.003  # first guess of the time to turn an LNS schedule into steps, per task to do
 
 __all__ = ["DEFAULT_BUDGET_MS", "EXACT_TASKS", "AutoPolicy"]
 
@@ -78,6 +83,9 @@ class AutoPolicy:
         self.rng = np.random.default_rng(seed)
         self.plans = self.fallbacks = 0  # plans made afresh; steps decided by GRP alone (no plan in the budget)
         self.improved = {"exact": 0, "lns": 0, "sample": 0}  # times each improver shortened the plan
+        self.unplannable = math.inf  # more tasks to do than this: no quick plan is tried (none fitted the budget)
+        self.follow_per_task = FOLLOW_SECONDS_PER_TASK  # turning an LNS schedule into steps (measured)
+        self.sampling_fits = True  # LVWS's quick plan finished within the budget (else neither would a sample)
         self._schedule: Schedule | None = None  # the plan's whole schedule (CP-SAT's warm start)
 
     def reset(self, instance: Instance) -> None:
@@ -90,6 +98,8 @@ class AutoPolicy:
         self.rng = np.random.default_rng(self.seed)
         self.plans = self.fallbacks = 0
         self.improved = {"exact": 0, "lns": 0, "sample": 0}
+        self.unplannable = math.inf
+        self.sampling_fits = True
 
     @property
     def planned_makespan(self) -> float:
@@ -124,7 +134,7 @@ class AutoPolicy:
         if left <= 0.01:
             return
         if todo > self.exact_tasks:
-            self._lns(state, left * EXACT_SHARE)
+            self._lns(state, todo, deadline)
             return
         hint = self._schedule if self.plan.steps else None  # warm start: the plan followed
         expert = ExactPolicy(time_limit=left * EXACT_SHARE, workers=self.workers, seed=self.seed, hint=hint)
@@ -140,24 +150,35 @@ class AutoPolicy:
                 and abs(float(res.schedule.makespan) - self.plan.makespan) <= TOLERANCE:
             self.proven = True  # optimal for the executor's model too: nothing left to improve
 
-    def _lns(self, state: State, seconds: float) -> None:
+    def _lns(self, state: State, todo: int, deadline: float) -> None:
         """Large-neighbourhood search on the plan from ``state`` (cells too big for CP-SAT's
-        whole model; not with travel), followed when shorter."""
+        whole model; not with travel), followed when shorter. Time is kept back for turning
+        an improved schedule into steps (measured per task to do), all within ``deadline``."""
         from lvws_ros.policies.exact import ExactPolicy, ExpertResult
         from lvws_ros.policies.lns import improve
 
+        left = deadline - time.perf_counter()
+        seconds = left * EXACT_SHARE - self.follow_per_task * todo
         if state.instance.travel is not None or self._schedule is None or not self.plan.steps or seconds <= 0.05:
             return
-        found = improve(state.instance, self._schedule, state=state, time_limit=seconds, workers=1,
-                        seed=self.seed + state.step)
+        try:
+            found = improve(state.instance, self._schedule, state=state, time_limit=seconds, workers=1,
+                            seed=self.seed + state.step)
+        except ExpertError:
+            return
         if not found.improved:
             return
         follower = ExactPolicy(time_limit=0.1, workers=1, seed=self.seed)
         follower.follow(ExpertResult(found.schedule, "feasible", found.schedule.makespan, math.nan, found.seconds,
                                      False), state)
-        res = self._finish(follower, state, None)
-        if res is not None and self._offer_run(state, res):
-            self.improved["lns"] += 1
+        t0 = time.perf_counter()
+        res = self._finish(follower, state, deadline)
+        if res is not None:
+            self.follow_per_task = (time.perf_counter() - t0) / max(1, todo)
+            if self._offer_run(state, res):
+                self.improved["lns"] += 1
+        else:  # the steps did not fit: keep more time back next time
+            self.follow_per_task *= 2
 
     def decide(self, state: State) -> Decision:
         deadline = time.perf_counter() + self.budget_ms / 1000
@@ -167,16 +188,25 @@ class AutoPolicy:
         if not following:
             self.plan.clear()
             self.proven = False
+            todo = int(np.sum((state.task_status == TaskStatus.QUEUED) | (state.task_status == TaskStatus.READY)))
+            if todo > self.unplannable:  # no quick plan fitted the budget at this size: GRP's step at once
+                self.fallbacks += 1
+                return self.grp.decide(state)
             self.plans += 1
             limit = None if self.budget_ms == 0 else deadline  # budget 0: the quick plan alone, however long
-            for res in (self._finish(self.grp, state, limit), self._finish(self.sampler.base, state, limit)):
+            quick = self._finish(self.grp, state, limit), self._finish(self.sampler.base, state, limit)
+            for res in quick:
                 if res is not None:
                     self._offer_run(state, res)
+            self.sampling_fits = quick[1] is not None
             self.quick_makespan = self.plan.makespan if self.plan.steps else math.nan
+            if not self.plan.steps:
+                self.unplannable = todo // 2  # try again when half as many tasks are left
         if time.perf_counter() < deadline:
             self._exact(state, deadline)
         one = math.inf  # seconds per sampled schedule in the latest round: rounds sized to the time left
-        while not self.proven and self.sampler.temperature > 0 and (t0 := time.perf_counter()) < deadline:
+        while not self.proven and self.sampling_fits and self.sampler.temperature > 0 \
+                and (t0 := time.perf_counter()) < deadline:
             count = self.sampler.samples if not math.isfinite(one) else \
                 min(self.sampler.samples, max(1, int((deadline - t0) / max(one, 1e-6))))
             found = sample_schedules(self.sampler.base, state, count, self.sampler.temperature, self.rng,

@@ -141,7 +141,11 @@ def _shift(inst: Instance, sched: Schedule, state: State | None) -> tuple[Schedu
         for k in np.flatnonzero(state.task_status >= TaskStatus.ASSIGNED):
             end[inst.tasks[k].id] = float(state.task_start[k] + inst.durations[k])
             fixed.add(inst.tasks[k].id)
-    out = [a for a in sched.assignments if a.task in fixed]
+    # tasks done or in progress as the state has them (the world may run ahead of the plan)
+    out = [] if state is None else [
+        Assignment(inst.tasks[k].id, tuple(inst.robots[r].id for r in state.task_team[k]),
+                   float(state.task_start[k]), float(state.task_start[k] + inst.durations[k]))
+        for k in np.flatnonzero(state.task_status >= TaskStatus.ASSIGNED)]
     leave: dict[str, float] = {}
     for a in sorted((a for a in sched.assignments if a.task not in fixed), key=lambda a: (a.start, a.task)):
         j = inst.task_index[a.task]

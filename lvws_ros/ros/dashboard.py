@@ -40,6 +40,7 @@ from lvws_ros.errors import LvwsError
 DEFAULT_PORT = 8080
 PUSH_SECONDS = 0.5  # the page is sent a new view this often
 KEPT_DIAGNOSTICS = 200  # the latest statuses shown (and kept, live)
+KEPT_DECISIONS = 20_000  # live: the latest decisions kept (the Gantt's assigned bars)
 
 __all__ = ["DEFAULT_PORT", "CellView", "LiveFeed", "main", "make_app"]
 
@@ -79,14 +80,38 @@ class CellView:
             # at a chosen time (a bag's slider): the statuses sent before its next decision
             diags = list(self.diagnostics) if at is None else \
                 [d for d in self.diagnostics if _count(d.get("decisions")) <= len(decisions)]
-            return {
+            return _finite({
                 "source": self.source, "namespace": self.namespace, "time": t, "end": self.end_time(),
                 "gantt": _gantt(graph, decisions, t), "waits": _waits(decisions),
                 "graph": _task_graph(graph), "robots": _robots(team), "cell": _cell(team, graph),
                 "diagnostics": diags[-KEPT_DIAGNOSTICS:], "latency": _latency(diags),
                 "tasks": [] if graph is None else [{"id": x.id, "status": STATUS_NAMES.get(x.status, "?")}
                                                     for x in graph.tasks],
-            }
+            })
+
+    def take(self, kind: str, item: Any) -> None:
+        """Live: a new team or graph snapshot (only the latest is kept), or a decision; a
+        stamp earlier than the latest (the world restarted) clears the run so far."""
+        with self.lock:
+            stamp = _when(item) if kind == "decisions" else item.stamp
+            if stamp < self.end_time() - 1e-6:
+                self.teams, self.graphs, self.decisions, self.diagnostics = [], [], [], []
+            if kind == "decisions":
+                self.decisions.append(item)
+                del self.decisions[:-KEPT_DECISIONS]
+            else:
+                setattr(self, kind, [item])
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with every NaN or infinite number made None (JSON has neither)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 def _when(d: OnlineDecision) -> float:
@@ -165,7 +190,7 @@ def _task_graph(graph: GraphSnapshot | None) -> dict[str, Any]:
     longest: dict[str, float] = {}  # the longest chain of tasks not done ending with each
     before: dict[str, str | None] = {}
     for k in order:
-        pre = [p for p in tasks[k].prerequisites if p in tasks]
+        pre = [p for p in tasks[k].prerequisites if p in longest]  # (a cycle, refused upstream, is cut here)
         layer[k] = 1 + max((layer[p] for p in pre), default=-1)
         left = tasks[k].duration if tasks[k].status != TaskStatus.DONE else 0.0
         best = max(pre, key=lambda p: longest[p], default=None)
@@ -232,11 +257,14 @@ class LiveFeed:
         self.node = rclpy.create_node("lvws_dashboard", namespace=namespace or None)
         view.namespace = self.node.get_namespace()
 
+        log = self.node.get_logger()
+
         def add(kind: str, convert_msg: Callable[[Any], Any]) -> Callable[[Any], None]:
             def take(msg: Any) -> None:
-                item = convert_msg(msg)
-                with view.lock:
-                    getattr(view, kind).append(item)
+                try:
+                    view.take(kind, convert_msg(msg))
+                except LvwsError as exc:  # a malformed message: shown as the scheduler would say it
+                    log.warning(f"{kind}: ignored: {exc}")
             return take
 
         def diagnostics(msg: Any) -> None:
@@ -324,16 +352,26 @@ def make_app(view: CellView, feed: LiveFeed | None = None) -> Any:
     async def view_json(request: Request) -> JSONResponse:
         return JSONResponse(view.view(at(request.query_params.get("t"))))
 
+    def same_origin(headers: Any) -> bool:
+        """A request from this page (or from no page): another site's page must not act on the cell."""
+        origin = headers.get("origin")
+        return origin is None or origin == f"http://{headers.get('host', '')}"
+
     async def ws(socket: WebSocket) -> None:
+        if not same_origin(socket.headers):
+            await socket.close(code=1008)
+            return
         await socket.accept()
         t: float | None = None
         try:
             while True:
                 await socket.send_text(json.dumps(view.view(t)))
                 try:  # the page may pick a time (bag mode: the slider); else the latest
-                    msg = await asyncio.wait_for(socket.receive_text(), timeout=PUSH_SECONDS)
-                    t = at(json.loads(msg).get("t"))
+                    msg = json.loads(await asyncio.wait_for(socket.receive_text(), timeout=PUSH_SECONDS))
+                    t = at(msg.get("t")) if isinstance(msg, dict) else t
                 except TimeoutError:
+                    pass
+                except (ValueError, KeyError):  # not a time: ignored
                     pass
         except (WebSocketDisconnect, RuntimeError):
             return
@@ -341,8 +379,12 @@ def make_app(view: CellView, feed: LiveFeed | None = None) -> Any:
     async def world(request: Request) -> JSONResponse:
         if feed is None:
             return JSONResponse({"success": False, "message": "a recorded run: the world cannot be changed"})
+        if not same_origin(request.headers) or request.headers.get("content-type") != "application/json":
+            return JSONResponse({"success": False, "message": "refused: not from this page"}, status_code=403)
         try:
             body = await request.json()
+            if not isinstance(body, dict):
+                raise ValueError("expected a JSON object")
             kind, target = str(body.get("kind", "")), str(body.get("target", ""))
             tasks = None
             if kind == "submit":
@@ -374,6 +416,9 @@ def serve(view: CellView, feed: LiveFeed | None, host: str, port: int,
     """Serve the page until Ctrl-C (or the server stops)."""
     import uvicorn
 
+    from lvws_ros.ros.launcher import check_port
+
+    check_port(host, port)
     config = uvicorn.Config(make_app(view, feed), host=host, port=port, log_level="warning", lifespan="off")
     server = uvicorn.Server(config)
     started(f"dashboard: http://{host}:{port}/ ({view.source})")

@@ -22,6 +22,7 @@ import json
 import os
 import random
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -81,6 +82,15 @@ def stop(children: Sequence[Child], grace: float = 10.0) -> dict[str, int | None
     return {c.name: c.proc.poll() for c in children}
 
 
+def check_port(host: str, port: int) -> None:
+    """LaunchError when nothing can listen on ``host:port`` (taken, or not an address here)."""
+    with socket.socket() as probe:
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            raise LaunchError(f"cannot serve on {host}:{port}: {exc.strerror or exc}") from None
+
+
 def _tail(path: Path, lines: int = 15) -> str:
     try:
         return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
@@ -98,12 +108,13 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
     # one precedence, applied here: explicit arguments > the parameter file (its values for
     # this node, ``file_params``) > our defaults; the file's values go on as -p (rcl would
     # not match a file's `scheduler:` to /<ns>/scheduler)
-    defaults = {"policy": DEFAULT_POLICY, "seed": 0, "use_sim_time": True, "expect_subscribers": 2}
+    audience = 3 if dashboard is not None else 2  # the recorder, the world or the scheduler, and the dashboard
+    defaults = {"policy": DEFAULT_POLICY, "seed": 0, "use_sim_time": True, "expect_subscribers": audience}
     explicit = {k: v for k, v in (("policy", policy), ("seed", seed), ("model_path", model_path or None))
                 if v is not None}
     sched: dict[str, object] = {**defaults, **file_params, **explicit}
     sched_params = [a for k, v in sched.items() for a in ("-p", f"{k}:={_param(v)}")]
-    sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary}", "-p", "expect_subscribers:=2",
+    sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary}", "-p", f"expect_subscribers:={audience}",
                   "-p", f"sync:={'true' if sync else 'false'}"]
     if gif is not None:
         sim_params += ["-p", f"gif:={gif}"]
@@ -245,6 +256,8 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
 
     namespace = check_namespace(namespace)
+    if dashboard is not None:
+        check_port("127.0.0.1", dashboard)  # before anything starts
     in_file = _check_inputs(policy, model_path, config, params_file, events, namespace)
     label = policy or str(in_file.get("policy", DEFAULT_POLICY))
     cell = f"{namespace.strip('/').replace('/', '-')}-" if namespace else ""

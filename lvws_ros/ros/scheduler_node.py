@@ -33,6 +33,7 @@ import traceback
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -230,6 +231,7 @@ class SchedulerNode(LifecycleNode):
         self.latest: dict[str, Callable[[], None]] = {}  # the latest message of each kind, for a new core
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="decide")
         self.in_flight: Future[OnlineDecision | None] | None = None  # the decision being computed
+        self.deciding_core: OnlineScheduler | None = None  # the core it is computed by
         self.deferred: list[Callable[[], None]] = []  # what arrived meanwhile, applied after it
         self.decided = self.create_guard_condition(lambda: self.guarded(self.on_decided))
         self.add_on_set_parameters_callback(self.on_set_parameters)
@@ -261,6 +263,10 @@ class SchedulerNode(LifecycleNode):
             self.error = str(exc)
             self.get_logger().error(f"configure failed: {exc}")
             return TransitionCallbackReturn.FAILURE
+        except Exception as exc:  # a bug or a broken install: said, with the traceback
+            self.error = f"{type(exc).__name__}: {exc}"
+            self.get_logger().error(f"configure failed:\n{traceback.format_exc()}")
+            return TransitionCallbackReturn.FAILURE
         self.error = ""
         self.core = OnlineScheduler(policy, float(values["ack_timeout"]), fallback=fallback)
         for offer in list(self.latest.values()):
@@ -286,7 +292,7 @@ class SchedulerNode(LifecycleNode):
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.when_idle(self.free)
+        self.free()  # a decision in flight keeps its own core; its result is dropped (on_decided)
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -296,6 +302,7 @@ class SchedulerNode(LifecycleNode):
     def free(self) -> None:
         """Drop the core with its policies and model (cleanup)."""
         self.core = None
+        gc.unfreeze()  # what configure froze may go now
         gc.collect()
 
     def values(self, changes: list[Parameter] | None = None) -> dict[str, Any]:
@@ -318,7 +325,7 @@ class SchedulerNode(LifecycleNode):
                 policy, fallback = build_policies(values)
                 core = self.core
                 if core is not None and core.team is not None and core.graph is not None and fallback is None:
-                    policy.reset(core.instance())  # no fallback: the new policy must serve this cell
+                    policy.reset(core.pure_instance())  # no fallback: the new policy must serve this cell
             except Exception as exc:  # a model that does not load, a policy that cannot serve the cell
                 return SetParametersResult(successful=False, reason=f"{type(exc).__name__}: {exc}")
             self.when_idle(lambda: self.core.set_policies(policy, fallback) if self.core is not None else None)
@@ -326,8 +333,9 @@ class SchedulerNode(LifecycleNode):
             self.report(DiagnosticStatus.OK,
                         f"parameters {', '.join(sorted(names))} changed: policy {self.policy_name}, fallback "
                         f"{values['fallback_policy'] or 'none'}")
-        if "ack_timeout" in names and self.core is not None:
-            self.core.ack_timeout = float(values["ack_timeout"])
+        if "ack_timeout" in names:
+            timeout = float(values["ack_timeout"])
+            self.when_idle(lambda: setattr(self.core, "ack_timeout", timeout) if self.core is not None else None)
         return SetParametersResult(successful=True)
 
     def on_team(self, msg: TeamState) -> None:
@@ -361,6 +369,8 @@ class SchedulerNode(LifecycleNode):
         try:
             work()
         except Exception as exc:
+            if not self.context.ok():  # shutting down (Ctrl-C) while it ran: nothing to report
+                return
             self.error = f"internal error {type(exc).__name__}: {exc}"
             self.get_logger().error(traceback.format_exc())
             self.publish_diagnostics(DiagnosticStatus.ERROR, self.error)
@@ -413,6 +423,7 @@ class SchedulerNode(LifecycleNode):
         if self.in_flight is not None:  # after the one in flight, with what arrived meanwhile
             self.deferred.append(self.maybe_step)
             return
+        self.deciding_core = self.core
         self.in_flight = self.worker.submit(self.core.decide)
         self.in_flight.add_done_callback(lambda _done: self.decided.trigger())
 
@@ -426,19 +437,26 @@ class SchedulerNode(LifecycleNode):
             self.publish_decision(done)
         finally:
             work, self.deferred = self.deferred, []
-            for item in work:
-                self.when_idle(item)
+            for item in work if self.context.ok() else ():
+                self.when_idle(partial(self.guarded, item))
 
     def publish_decision(self, done: Future[OnlineDecision | None]) -> None:
+        core, self.deciding_core = self.deciding_core, None
+        if core is not self.core:  # cleaned up meanwhile: that core's decision is void
+            return
         try:
             decision = done.result()
         except LvwsError as exc:
             self.error = f"{type(exc).__name__}: {exc}"
             self.report(DiagnosticStatus.ERROR, self.error)
             return
+        assert core is not None
         self.error = ""
         self.flush_notices()
-        if decision is None or not self.active:  # deactivated meanwhile: nothing goes out
+        if decision is not None and not self.active:  # deactivated meanwhile: nothing goes out
+            core.forget(decision)
+            return
+        if decision is None:
             return
         self.last_latency = decision.latency
         # never stamped before the inputs it answers (a sim clock may lag the state)

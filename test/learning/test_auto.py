@@ -73,3 +73,14 @@ def test_a_negative_budget_is_refused_and_the_registry_makes_auto():
     with pytest.raises(PolicyError, match="auto"):
         AutoPolicy(budget_ms=-1.0)
     assert isinstance(make_policy("auto", budget_ms=5.0), AutoPolicy)
+
+
+def test_where_no_quick_plan_fits_the_budget_auto_takes_grp_steps_without_trying_each_time():
+    inst = random_instance(np.random.default_rng(5), 30, 120, "big")
+    auto = AutoPolicy(budget_ms=0.5, samples=2)  # not even GRP's whole schedule fits half a millisecond
+    sched = simulate(inst, auto).schedule
+    grp = simulate(inst, GreedyPayloadPolicy()).schedule
+    assert check_schedule(inst, sched) == []
+    assert sched.makespan <= grp.makespan + 1e-9
+    assert auto.fallbacks > 0
+    assert auto.plans <= 9  # tried again only when half as many tasks were left (120 -> 60 -> ... -> 1)

@@ -11,7 +11,7 @@ import pytest
 from lvws_ros.core.datasets import DATASETS, dataset_instance, subteam_heavy_instance
 from lvws_ros.core.executor import simulate
 from lvws_ros.core.formats import load_schedule, save_schedule
-from lvws_ros.core.schedule import check_schedule
+from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.errors import ExpertError
 from lvws_ros.learning.auto import AutoPolicy
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomPolicy
@@ -66,7 +66,7 @@ def test_lns_says_why_it_does_not_search_with_travel():
 
 def test_auto_searches_neighbourhoods_on_a_cell_too_big_for_the_whole_model():
     inst = _cell()
-    auto = AutoPolicy(budget_ms=400.0, exact_tasks=10, samples=2)
+    auto = AutoPolicy(budget_ms=800.0, exact_tasks=10, samples=2)
     sched = simulate(inst, auto).schedule
     assert check_schedule(inst, sched) == []
     grp = simulate(inst, GreedyPayloadPolicy()).schedule
@@ -79,3 +79,18 @@ def test_lns_stops_at_a_lower_bound():
     start = simulate(inst, GreedyPayloadPolicy()).schedule
     found = improve(inst, start, time_limit=30.0, bound=start.makespan)
     assert found.rounds == 0 and found.seconds < 5.0
+
+
+def test_lns_from_a_state_that_ran_ahead_of_the_plan():
+    inst = _cell()
+    run = simulate(inst, GreedyPayloadPolicy(), record_states=True)
+    state = run.steps[len(run.steps) // 2].state
+    # the plan followed is 0.3 s behind the world: every task planned 0.3 s later than it ran
+    plan = Schedule.from_assignments(inst.name, "plan", [Assignment(a.task, a.robots, a.start + 0.3, a.end + 0.3)
+                                                         for a in run.schedule.assignments])
+    assert check_schedule(inst, plan) == []
+    found = improve(inst, plan, state=state, time_limit=1.0, window=8, round_limit=0.2)
+    assert check_schedule(inst, found.schedule) == []
+    by_task = found.schedule.by_task()
+    for j in np.flatnonzero(state.task_status >= 2):  # what has started is as the world has it
+        assert by_task[inst.tasks[j].id].start == pytest.approx(state.task_start[j])
