@@ -85,6 +85,7 @@ class AutoPolicy:
         self.improved = {"exact": 0, "lns": 0, "sample": 0}  # times each improver shortened the plan
         self.unplannable = math.inf  # more tasks to do than this: no quick plan is tried (none fitted the budget)
         self.follow_per_task = FOLLOW_SECONDS_PER_TASK  # turning an LNS schedule into steps (measured)
+        self.lns_windows = 0  # neighbourhoods the large-neighbourhood search solved
         self.sampling_fits = True  # LVWS's quick plan finished within the budget (else neither would a sample)
         self._schedule: Schedule | None = None  # the plan's whole schedule (CP-SAT's warm start)
 
@@ -100,6 +101,7 @@ class AutoPolicy:
         self.improved = {"exact": 0, "lns": 0, "sample": 0}
         self.unplannable = math.inf
         self.sampling_fits = True
+        self.lns_windows = 0
 
     @property
     def planned_makespan(self) -> float:
@@ -166,6 +168,7 @@ class AutoPolicy:
                             seed=self.seed + state.step)
         except ExpertError:
             return
+        self.lns_windows += found.rounds
         if not found.improved:
             return
         follower = ExactPolicy(time_limit=0.1, workers=1, seed=self.seed)

