@@ -40,6 +40,22 @@ def test_scripted_events_complete_and_the_bag_holds_the_final_task_set(tmp_path:
     assert checked == rep.decisions and not bad
 
 
+def test_the_default_policy_auto_replans_through_the_events_and_completes_valid(tmp_path: Path):
+    from lvws_ros.ros.bag import read_run
+    from lvws_ros.ros.launcher import launch
+
+    events = tmp_path / "events.yaml"
+    events.write_text(EVENTS)  # a cancel, a robot failure mid-run, two new tasks, the repair
+    res = launch(rate=20.0, bag_dir=tmp_path / "bags", out_dir=tmp_path / "out", name="auto-events",
+                 gif=False, timeout=300.0, events=str(events), log=lambda _t: None)
+    s = res.summary
+    assert s["error"] == "" and s["tasks_done"] == s["tasks"] == 15, s
+    assert "jackal_2 failed" in " ".join(s["world_events"])
+    rep = report(res.bag)
+    assert rep.complete and check_schedule(rep.instance, rep.schedule) == []
+    assert {d.policy for d in read_run(res.bag).decisions} == {"auto"}  # the node's default
+
+
 def test_a_failure_that_makes_a_task_impossible_ends_the_run_with_the_reason(tmp_path: Path):
     from lvws_ros.ros.launcher import launch
 
