@@ -26,7 +26,7 @@ import numpy as np
 
 FAMILIES = ("ours", "subteam-heavy")
 TRAVEL_FAMILIES = ("depot",)
-POLICIES = ("grp", "rand", "rand_subteam", "dbgm", "lvws", "lvws_rollout")
+POLICIES = ("grp", "rand", "rand_subteam", "dbgm", "lvws", "lvws_rollout", "auto")
 ROLLOUT_BUDGET_MS = 100.0  # the rollout at scale: per decision step
 
 
