@@ -369,7 +369,7 @@ def make_app(view: CellView, feed: LiveFeed | None = None) -> Any:
                 try:  # the page may pick a time (bag mode: the slider); else the latest
                     msg = json.loads(await asyncio.wait_for(socket.receive_text(), timeout=PUSH_SECONDS))
                     t = at(msg.get("t")) if isinstance(msg, dict) else t
-                except TimeoutError:
+                except asyncio.TimeoutError:  # (TimeoutError itself from Python 3.11 on)
                     pass
                 except (ValueError, KeyError):  # not a time: ignored
                     pass
