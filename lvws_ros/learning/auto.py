@@ -64,6 +64,11 @@ FOLLOW_SECONDS_PER_TASK = 0.003  # first guess of the time to turn an LNS schedu
 __all__ = ["DEFAULT_BUDGET_MS", "EXACT_TASKS", "AutoPolicy"]
 
 
+def _to_do(state: State) -> int:
+    """Tasks not started yet."""
+    return int(np.sum(state.task_status <= TaskStatus.READY))
+
+
 class AutoPolicy:
     """The best plan found within ``budget_ms`` per decision step (module docstring)."""
 
@@ -131,7 +136,7 @@ class AutoPolicy:
         """CP-SAT from ``state``, warm-started from the plan, within the time left."""
         from lvws_ros.policies.exact import ExactPolicy, proves_executor_bound
 
-        todo = int(np.sum((state.task_status == TaskStatus.QUEUED) | (state.task_status == TaskStatus.READY)))
+        todo = _to_do(state)
         left = deadline - time.perf_counter()
         if left <= 0.01:
             return
@@ -191,7 +196,7 @@ class AutoPolicy:
         if not following:
             self.plan.clear()
             self.proven = False
-            todo = int(np.sum((state.task_status == TaskStatus.QUEUED) | (state.task_status == TaskStatus.READY)))
+            todo = _to_do(state)
             if todo > self.unplannable:  # no quick plan fitted the budget at this size: GRP's step at once
                 self.fallbacks += 1
                 return self.grp.decide(state)

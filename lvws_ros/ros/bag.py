@@ -21,7 +21,7 @@ from rosbags.typesys.store import Typestore
 
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, TeamSnapshot
 from lvws_ros.errors import BagError
-from lvws_ros.ros.convert import decision_from_msg, graph_from_msg, team_from_msg
+from lvws_ros.ros.convert import decision_from_msg, diagnostics_from_msg, graph_from_msg, team_from_msg
 from lvws_ros.ros.resources import msg_dir
 from lvws_ros.ros.topics import ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GRAPH_TOPIC, TEAM_TOPIC, split_topic
 
@@ -181,9 +181,7 @@ def _add(run: Run, topic: str, msg: Any) -> None:
     elif topic == ASSIGNMENTS_TOPIC:
         run.decisions.append(decision_from_msg(msg))
     else:
-        for s in msg.status:
-            run.diagnostics.append({"name": s.name, "level": str(s.level), "message": s.message,
-                                    "hardware_id": s.hardware_id, **{kv.key: kv.value for kv in s.values}})
+        run.diagnostics.extend(diagnostics_from_msg(msg))
 
 
 def read_run(path: str | Path) -> Run:

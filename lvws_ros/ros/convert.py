@@ -112,6 +112,13 @@ def decision_from_msg(msg: Any) -> OnlineDecision:
                           from_time(msg.graph_stamp), msg.policy)
 
 
+def diagnostics_from_msg(msg: Any) -> list[dict[str, str]]:
+    """A DiagnosticArray's statuses as flat dicts: name, level, message, hardware_id and
+    each key-value pair."""
+    return [{"name": s.name, "level": str(s.level), "message": s.message, "hardware_id": s.hardware_id,
+             **{kv.key: kv.value for kv in s.values}} for s in msg.status]
+
+
 def cell_task_to_msg(item: dict[str, Any], k: int = 0) -> CellTask:
     """A task entry of the cell config (``from``/``to`` or ``cell``) as a CellTask
     (ConfigError naming entry ``k``)."""

@@ -24,7 +24,6 @@ import argparse
 import asyncio
 import json
 import math
-import os
 import sys
 import tempfile
 import threading
@@ -269,9 +268,7 @@ class LiveFeed:
 
         def diagnostics(msg: Any) -> None:
             with view.lock:
-                for s in msg.status:
-                    view.diagnostics.append({"name": s.name, "level": str(s.level), "message": s.message,
-                                             "hardware_id": s.hardware_id, **{kv.key: kv.value for kv in s.values}})
+                view.diagnostics.extend(convert.diagnostics_from_msg(msg))
                 del view.diagnostics[:-KEPT_DIAGNOSTICS]
 
         n = self.node
@@ -445,10 +442,10 @@ def run(args: argparse.Namespace) -> int:
     if args.bag:
         serve(CellView.from_bag(args.bag), None, args.host, args.port)
         return 0
-    if args.domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
-        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # what lvws launch uses
     from lvws_ros.ros.launcher import check_namespace
+    from lvws_ros.ros.world_client import join_domain
+
+    join_domain(args.domain_id)
 
     view = CellView()
     feed = LiveFeed(view, check_namespace(args.namespace))

@@ -17,7 +17,7 @@ from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.ros.convert import cell_task_to_msg
 from lvws_ros.sim.config import read_yaml
 
-__all__ = ["SERVICES", "call_world", "tasks_from_file", "world_request"]
+__all__ = ["SERVICES", "call_world", "join_domain", "tasks_from_file", "world_request"]
 
 SERVICES = {"submit": "submit_tasks", "cancel": "cancel_task", "fault": "set_robot_fault"}
 
@@ -31,6 +31,14 @@ def tasks_from_file(path: str | Path) -> list[dict[str, Any]]:
     if not isinstance(items, list) or not items or not all(isinstance(t, dict) for t in items):
         raise ConfigError(f"{p}: expected a non-empty list of task entries (or a mapping with a 'tasks' list)")
     return items
+
+
+def join_domain(domain_id: int | None) -> None:
+    """Talk on DDS domain ``domain_id`` (None: as the environment says), on this machine
+    only unless the environment says otherwise (what ``lvws launch`` uses)."""
+    if domain_id is not None:
+        os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 
 def world_request(kind: str, *, tasks: Sequence[dict[str, Any]] = (), target: str = "",
@@ -51,9 +59,7 @@ def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]
                failed: bool = True, domain_id: int | None = None, timeout: float = 20.0) -> tuple[bool, str]:
     """Call one of the simulator's services and return (accepted, message); LvwsError when
     no simulator answers within ``timeout`` wall seconds."""
-    if domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(domain_id)
-        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # what lvws launch uses
+    join_domain(domain_id)
     import rclpy
 
     srv, request = world_request(kind, tasks=tasks, target=target, failed=failed)
