@@ -75,7 +75,7 @@ def _release(inst: Instance) -> FloatArray:
         times[mine] = quickest[np.ix_(site[mine], meet)]
     fixed = np.flatnonzero(speed <= 0)  # a fixed robot: only at its site, never on a task that moves its team
     times[fixed] = np.where((site[fixed][:, None] == meet[None, :]) & ~moves[None, :], 0.0, np.inf)
-    out = earliest_cover(times, inst.robot_caps, inst.robot_payload, inst.task_caps, inst.task_payload)
+    out = earliest_cover(times, inst.robot_amounts, inst.robot_payload, inst.task_needs, inst.task_payload)
     return np.where(np.isfinite(out), out, 0.0)  # never covered from time 0: no bound from it
 
 
@@ -96,10 +96,11 @@ def _workload(inst: Instance) -> float:
     durations = inst.durations
     fewest = np.minimum(fewest_carriers(inst.robot_payload, inst.task_payload), n)  # robots for the payload
     ratios = [float((durations * np.maximum(fewest, 1)).sum()) / n]
-    holders = inst.robot_caps.sum(axis=0)
-    for k in range(inst.task_caps.shape[1]):
-        if holders[k]:
-            ratios.append(float(durations[inst.task_caps[:, k]].sum()) / float(holders[k]))
+    holders = inst.robot_amounts.sum(axis=0)  # per capability (trait): how much of it the team has
+    for k in range(inst.task_needs.shape[1]):
+        need = inst.task_needs[:, k] > 0
+        if holders[k] > 0:
+            ratios.append(float((durations[need] * inst.task_needs[need, k]).sum()) / float(holders[k]))
     team = float(inst.robot_payload.sum())
     if team > 0:
         ratios.append(float((np.maximum(inst.task_payload - TOLERANCE, 0.0) * durations).sum()) / team)

@@ -230,7 +230,8 @@ def check_decision(state: State, decision: Decision, policy: str = "policy") -> 
         if math.isinf(state.arrival(task, idx)):
             raise PolicyError(f"{policy}: task {tid!r}: a fixed robot of {[inst.robots[r].id for r in team]} is at "
                               "another site (travel extension)")
-        if not covers(inst.robot_caps[idx], inst.robot_payload[idx], inst.task_caps[task], inst.tasks[task].payload):
+        if not covers(inst.robot_amounts[idx], inst.robot_payload[idx], inst.task_needs[task], inst.tasks[task].payload,
+                      bool(inst.task_roles[task])):
             raise PolicyError(f"{policy}: subteam {[inst.robots[r].id for r in team]} does not cover task {tid!r} (Eqs. 10-11)")
 
 
@@ -254,11 +255,11 @@ def voluntary_waits(state: State, decision: Decision) -> dict[int, tuple[int, ..
     reach = state.reachable(left, ready)
     for c, j in enumerate(ready):
         able = [r for r, ok in zip(left, reach[:, c], strict=True) if ok]
-        caps, payloads = inst.robot_caps[able], inst.robot_payload[able]
-        if not able or not covers(caps, payloads, inst.task_caps[j], inst.tasks[j].payload):
+        caps, payloads, roles = inst.robot_amounts[able], inst.robot_payload[able], bool(inst.task_roles[j])
+        if not able or not covers(caps, payloads, inst.task_needs[j], inst.tasks[j].payload, roles):
             continue
         for k, r in enumerate(able):
-            if cover_with(caps, payloads, inst.task_caps[j], inst.tasks[j].payload, k) is not None:
+            if cover_with(caps, payloads, inst.task_needs[j], inst.tasks[j].payload, k, roles) is not None:
                 out.setdefault(r, []).append(j)
     return {r: tuple(ts) for r, ts in sorted(out.items())}
 
@@ -319,6 +320,14 @@ def advance(state: State, decision: Decision) -> State | None:
     return s
 
 
+def final_makespan(state: State) -> float:
+    """The makespan of a finished run by the instance's objective: the last task's end, or
+    (``"objective": "return"``) when the last robot is home."""
+    if state.instance.objective != "return":
+        return float(np.nanmax(state.task_end))
+    return schedule_from_state(state, "").makespan
+
+
 def schedule_from_state(state: State, policy: str, decisions: int = 0, compute: float = 0.0) -> Schedule:
     inst = state.instance
     out = [
@@ -331,4 +340,4 @@ def schedule_from_state(state: State, policy: str, decisions: int = 0, compute: 
         for j, t in enumerate(inst.tasks)
         if not np.isnan(state.task_start[j])
     ]
-    return Schedule.from_assignments(inst.name, policy, out, decisions, compute)
+    return Schedule.from_assignments(inst, policy, out, decisions, compute)

@@ -27,13 +27,24 @@ and measured only there says little about a user's cell, so we draw from familie
   tasks, 35 % transports (IV: 25 %), in-trees, chains or layers, log-normal float
   durations around 10 s, payloads log-normal around 12. Each task is drawn again until
   the robots that can reach it cover it.
+* ``traits`` — additive traits (formats.md, "Traits"), written in traits alone: L = 1..16
+  traits; 3..8 robots, each with 1..3 traits in whole amounts 1..5 (small ones likelier);
+  6..18 tasks needing 1..3 traits in amounts 1..5 (about one in five needs 3 or more of
+  one), 30 % of them with roles; integer durations 1..20; a DAG shape among
+  :data:`DAG_SHAPES`. Not yet in the training mixture.
+* ``traits-roles`` — held out, traits: roles on every task (the instance's ``roles``),
+  specialists (each robot 1..2 of L = 3..8 traits), a summed ``payload`` trait in float
+  kilograms beside them, in-trees or layers, log-normal float durations around 20 s.
+
+Each trait instance's tasks are drawn again until the whole team covers them (with roles
+where they have them).
 
 Instance ``k`` of family ``f`` comes from ``numpy.random.default_rng([seed, code(f), k])``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -54,6 +65,7 @@ class Family:
     held_out: bool
     description: str
     travel: bool = False  # its instances have sites, speeds and task sites
+    traits: bool = False  # its instances are written in additive traits (not in the paper's tables)
 
 
 FAMILIES = {
@@ -62,6 +74,10 @@ FAMILIES = {
     "mspsp": Family("mspsp", 13, True, "held out: multi-skill project scheduling (unit workers, K 4-8)"),
     "depot": Family("depot", 14, True, "held out, travel: 4-7 stations at float points, straight-line "
                     "distances, K 3-5 specialists, 5 speeds 0.4-1.25, 40 % fixed, 35 % transports", travel=True),
+    "traits": Family("traits", 15, False, "additive traits: L 1-16, amounts 1-5, 30 % of tasks with roles",
+                     traits=True),
+    "traits-roles": Family("traits-roles", 16, True, "held out, traits: roles everywhere, specialists, a float "
+                           "payload trait, in-trees or layers, float durations", traits=True),
 }
 
 
@@ -243,6 +259,55 @@ def depot_instance(rng: np.random.Generator, name: str, num_robots: int | None =
     return Instance(name, inst.capabilities, inst.robots, inst.tasks, travel=travel)
 
 
+def _draw_amounts(rng: np.random.Generator, count: int, most: int, high: int) -> np.ndarray:
+    """``count`` whole amounts in 1..``high``, small ones likelier, on 1..``most`` columns."""
+    p = 1.0 / np.arange(1, high + 1)
+    return rng.choice(np.arange(1, high + 1), size=count, p=p / p.sum()).astype(float)
+
+
+def trait_instance(rng: np.random.Generator, name: str, num_robots: int | None = None,
+                   num_tasks: int | None = None, held_out: bool = False) -> Instance:
+    """One instance of the ``traits`` family, or (``held_out``) of ``traits-roles``
+    (module docstring): no capabilities, no paper payload; every task coverable."""
+    n = num_robots or int(rng.integers(3, 9))
+    m = num_tasks or int(rng.integers(6, 19))
+    names = [f"trait{c}" for c in range(int(rng.integers(3, 9) if held_out else rng.integers(1, 17)))]
+    per_robot = 2 if held_out else 3
+    amounts = np.zeros((n, len(names)))
+    for i in range(n):
+        cols = rng.choice(len(names), size=min(len(names), int(rng.integers(1, per_robot + 1))), replace=False)
+        amounts[i, cols] = _draw_amounts(rng, len(cols), len(cols), 5)
+    for c in np.flatnonzero(~(amounts > 0).any(axis=0)):  # every trait held by someone
+        amounts[rng.integers(n), c] = _draw_amounts(rng, 1, 1, 5)[0]
+    if held_out:
+        names.append("payload")
+        amounts = np.hstack([amounts, rng.uniform(0.5, 5.0, size=(n, 1)).round(1)])
+    zero = np.zeros(n)
+    shape = str(rng.choice(("in_tree", "layered"))) if held_out else str(rng.choice(DAG_SHAPES))
+    pre = _dag(rng, m, shape)
+    tasks = []
+    for j in range(m):
+        roles = held_out or bool(rng.random() < 0.3)
+        while True:
+            need = np.zeros(len(names))
+            skills = len(names) - 1 if held_out else len(names)
+            cols = rng.choice(skills, size=min(skills, int(rng.integers(1, 4))), replace=False)
+            need[cols] = _draw_amounts(rng, len(cols), len(cols), 5)
+            if held_out and rng.random() < 0.5:
+                need[-1] = round(float(rng.lognormal(np.log(3.0), 0.6)), 1)
+            if covers(amounts, zero, need, 0.0, roles):
+                break
+        duration = max(0.5, round(float(rng.lognormal(np.log(20.0), 0.5)), 1)) if held_out else \
+            float(rng.integers(1, 21))
+        tasks.append(Task(f"t{j}", (), 0.0, duration, tuple(f"t{p}" for p in pre[j]),
+                          requires=tuple((names[c], float(need[c])) for c in np.flatnonzero(need)),
+                          roles=None if held_out else roles))
+    robots = tuple(Robot(f"r{i}", (), 0.0, traits=tuple((names[c], float(amounts[i, c]))
+                                                       for c in np.flatnonzero(amounts[i])))
+                   for i in range(n))
+    return Instance(name, (), robots, tuple(tasks), traits=tuple(names), roles=held_out)
+
+
 def family_instance(key: str, index: int, seed: int, num_robots: int | None = None,
                     num_tasks: int | None = None) -> Instance:
     """Instance ``index`` of family ``key`` (``mixed`` draws its own sizes unless given)."""
@@ -254,14 +319,16 @@ def family_instance(key: str, index: int, seed: int, num_robots: int | None = No
         inst = assembly_instance(rng, "tmp", num_robots or 6, num_tasks or 18)
     elif key == "depot":
         inst = depot_instance(rng, "tmp", num_robots, num_tasks)
+    elif fam.traits:
+        inst = trait_instance(rng, "tmp", num_robots, num_tasks, held_out=fam.held_out)
     else:
         inst = mspsp_instance(rng, "tmp", num_robots or 6, num_tasks or 18)
-    return Instance(f"{inst.num_robots}r-{inst.num_tasks}t-{key}-{index:05d}", inst.capabilities, inst.robots,
-                    inst.tasks, travel=inst.travel)
+    return replace(inst, name=f"{inst.num_robots}r-{inst.num_tasks}t-{key}-{index:05d}")
 
 
-TRAINING_FAMILIES = tuple(k for k, f in FAMILIES.items() if not f.held_out)
-HELD_OUT_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out and not f.travel)  # Table I
+TRAINING_FAMILIES = tuple(k for k, f in FAMILIES.items() if not f.held_out and not f.traits)
+HELD_OUT_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out and not f.travel and not f.traits)  # Table I
+TRAIT_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.traits)
 TRAVEL_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out and f.travel)  # Table III
 TEST_OFFSET = 1_000_000  # test instances of a family: indices from here (training uses 0, 1, ...)
 TEST_COUNT = 100

@@ -189,35 +189,52 @@ def _num(value: Any, where: str) -> float | int:
     return value
 
 
-def _robot(r: Any, where: str) -> Robot:
+def _amounts(value: Any, where: str) -> tuple[tuple[str, float], ...]:
+    """A ``traits``/``requires`` object: trait name -> amount (validated against the
+    instance's traits in :func:`~lvws_ros.core.problem.validate_instance`)."""
+    return tuple((name, _num(v, f"{where}.{name}")) for name, v in _object(value, where).items())
+
+
+def _roles(value: Any, where: str) -> bool:
+    if not isinstance(value, bool):
+        raise InstanceError(f"{where}: expected true or false, got {_type(value)}")
+    return value
+
+
+def _robot(r: Any, where: str, traits_only: bool) -> Robot:
     r = _object(r, where)
     rid = _string(_require(r, "id", where), f"{where}.id", "a robot id")
     try:
         return Robot(
             id=rid,
-            capabilities=_bits(_require(r, "capabilities", where), f"{where}.capabilities"),
-            payload=_num(_require(r, "payload", where), f"{where}.payload"),
-            extra={k: v for k, v in r.items() if k not in {"id", "capabilities", "payload"}},
+            capabilities=() if traits_only and "capabilities" not in r else
+            _bits(_require(r, "capabilities", where), f"{where}.capabilities"),
+            payload=_num(r.get("payload", 0.0) if traits_only else _require(r, "payload", where), f"{where}.payload"),
+            extra={k: v for k, v in r.items() if k not in {"id", "capabilities", "payload", "traits"}},
+            traits=_amounts(r.get("traits", {}), f"{where}.traits"),
         )
     except InstanceError as exc:
         raise InstanceError(f"{exc} (robot {rid[:40]!r})") from None
 
 
-_TASK_KEYS = {"id", "capabilities", "payload", "duration", "after"}
+_TASK_KEYS = {"id", "capabilities", "payload", "duration", "after", "requires", "roles"}
 
 
-def _task(t: Any, where: str) -> Task:
+def _task(t: Any, where: str, traits_only: bool) -> Task:
     t = _object(t, where)
     tid = _string(_require(t, "id", where), f"{where}.id", "a task id")
     try:
         after = _list(t.get("after", []), f"{where}.after")
         return Task(
             id=tid,
-            capabilities=_bits(_require(t, "capabilities", where), f"{where}.capabilities"),
-            payload=_num(_require(t, "payload", where), f"{where}.payload"),
+            capabilities=() if traits_only and "capabilities" not in t else
+            _bits(_require(t, "capabilities", where), f"{where}.capabilities"),
+            payload=_num(t.get("payload", 0.0) if traits_only else _require(t, "payload", where), f"{where}.payload"),
             duration=_num(_require(t, "duration", where), f"{where}.duration"),
             after=tuple(_string(p, f"{where}.after[{n}]", "a task id") for n, p in enumerate(after)),
             extra={k: v for k, v in t.items() if k not in _TASK_KEYS},
+            requires=_amounts(t.get("requires", {}), f"{where}.requires"),
+            roles=_roles(t["roles"], f"{where}.roles") if "roles" in t else None,
         )
     except InstanceError as exc:
         raise InstanceError(f"{exc} (task {tid[:40]!r})") from None
@@ -231,19 +248,33 @@ def instance_from_dict(data: Any) -> Instance:
     if fmt != INSTANCE_FORMAT:
         raise InstanceError(f"format: expected {INSTANCE_FORMAT!r}, got {str(fmt)[:40]!r}")
     name = _string(data.get("name", ""), "name")
-    caps = tuple(_string(c, f"capabilities[{n}]", "a capability name")
-                 for n, c in enumerate(_list(_require(data, "capabilities", "instance"), "capabilities")))
-    robots = [_robot(r, f"robots[{n}]") for n, r in enumerate(_list(_require(data, "robots", "instance"), "robots"))]
-    tasks = [_task(t, f"tasks[{n}]") for n, t in enumerate(_list(_require(data, "tasks", "instance"), "tasks"))]
+    traits = tuple(_string(c, f"traits[{n}]", "a trait name")
+                   for n, c in enumerate(_list(data.get("traits", []), "traits")))
+    traits_only = bool(traits) and "capabilities" not in data  # a file written in traits alone
+    caps = () if traits_only else tuple(
+        _string(c, f"capabilities[{n}]", "a capability name")
+        for n, c in enumerate(_list(_require(data, "capabilities", "instance"), "capabilities")))
+    robots = [_robot(r, f"robots[{n}]", traits_only)
+              for n, r in enumerate(_list(_require(data, "robots", "instance"), "robots"))]
+    tasks = [_task(t, f"tasks[{n}]", traits_only)
+             for n, t in enumerate(_list(_require(data, "tasks", "instance"), "tasks"))]
+    objective = _string(data.get("objective", "makespan"), "objective")
+    roles = _roles(data["roles"], "roles") if "roles" in data else False
     if "sites" not in data:  # no travel extension: zero travel, as in every file before it
-        return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks))
+        homes = [n for n, r in enumerate(robots) if "home" in r.extra]
+        if homes:
+            raise InstanceError(f"robots[{homes[0]}].home: a home site needs the instance's sites "
+                                f"(robot {robots[homes[0]].id[:40]!r})")
+        return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks), traits=traits,
+                        objective=objective, roles=roles)
     travel = _travel(data, robots, tasks)
     robots = [replace(r, extra={k: v for k, v in r.extra.items() if k not in _ROBOT_TRAVEL_KEYS}) for r in robots]
     tasks = [replace(t, extra={k: v for k, v in t.extra.items() if k not in _TASK_TRAVEL_KEYS}) for t in tasks]
-    return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks), travel=travel)
+    return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks), travel=travel,
+                    traits=traits, objective=objective, roles=roles)
 
 
-_ROBOT_TRAVEL_KEYS = {"site", "speed"}
+_ROBOT_TRAVEL_KEYS = {"site", "speed", "home"}
 _TASK_TRAVEL_KEYS = {"site", "from", "to"}
 
 
@@ -253,12 +284,13 @@ def _travel(data: dict[str, Any], robots: list[Robot], tasks: list[Task]) -> Tra
     distances = _object(data.get("distances", {}), "distances")
     for a, row in distances.items():
         _object(row, f"distances.{a}")
-    robot_sites = []
+    robot_sites, homes = [], []
     for n, r in enumerate(robots):
         where = f"robots[{n}]"
         site = _string(_require(r.extra, "site", f"{where} (the instance has sites)"), f"{where}.site", "a site name")
         speed = r.extra.get("speed")
         robot_sites.append((r.id, site, None if speed is None else _num(speed, f"{where}.speed")))
+        homes.append(_string(r.extra["home"], f"{where}.home", "a site name") if "home" in r.extra else None)
     task_sites = []
     for n, t in enumerate(tasks):
         where = f"tasks[{n}]"
@@ -271,30 +303,45 @@ def _travel(data: dict[str, Any], robots: list[Robot], tasks: list[Task]) -> Tra
         else:
             raise InstanceError(f"{where}: missing key 'site' (or 'from' and 'to'): the instance has sites "
                                 f"(task {t.id[:40]!r})")
-    return build_travel(sites, distances, robot_sites, task_sites)
+    return build_travel(sites, distances, robot_sites, task_sites, homes)
 
 
 def instance_to_dict(inst: Instance) -> dict[str, Any]:
-    out: dict[str, Any] = {
-        "format": INSTANCE_FORMAT,
-        "name": inst.name,
-        "capabilities": list(inst.capabilities),
-        "robots": [
-            {"id": r.id, "capabilities": list(r.capabilities), "payload": float(r.payload), **r.extra}
-            for r in inst.robots
-        ],
-        "tasks": [
-            {
-                "id": t.id,
-                "capabilities": list(t.capabilities),
-                "payload": float(t.payload),
-                "duration": float(t.duration),
-                "after": list(t.after),
-                **t.extra,
-            }
-            for t in inst.tasks
-        ],
-    }
+    """The ``lvws-instance/1`` object of ``inst``: a file without traits exactly as before
+    them; one written in traits alone (no capabilities) again without capabilities and
+    with payloads only where not 0."""
+    traits_only = bool(inst.traits) and not inst.capabilities
+    out: dict[str, Any] = {"format": INSTANCE_FORMAT, "name": inst.name}
+    if not traits_only:
+        out["capabilities"] = list(inst.capabilities)
+    if inst.traits:
+        out["traits"] = list(inst.traits)
+    if inst.objective != "makespan":
+        out["objective"] = inst.objective
+    if inst.roles:
+        out["roles"] = True
+    out["robots"] = []
+    for r in inst.robots:
+        robot: dict[str, Any] = {"id": r.id}
+        if not traits_only:
+            robot["capabilities"] = list(r.capabilities)
+        if not traits_only or r.payload:
+            robot["payload"] = float(r.payload)
+        if r.traits:
+            robot["traits"] = {name: amount for name, amount in r.traits}
+        out["robots"].append({**robot, **r.extra})
+    out["tasks"] = []
+    for t in inst.tasks:
+        task: dict[str, Any] = {"id": t.id}
+        if not traits_only:
+            task["capabilities"] = list(t.capabilities)
+        if not traits_only or t.payload:
+            task["payload"] = float(t.payload)
+        if t.requires:
+            task["requires"] = {name: amount for name, amount in t.requires}
+        if t.roles is not None:
+            task["roles"] = t.roles
+        out["tasks"].append({**task, "duration": float(t.duration), "after": list(t.after), **t.extra})
     tr = inst.travel
     if tr is not None:
         out["sites"] = {s: list(xy) for s, xy in zip(tr.sites, tr.coordinates, strict=True)}
@@ -306,6 +353,8 @@ def instance_to_dict(inst: Instance) -> dict[str, Any]:
             r["site"] = tr.sites[tr.robot_site[k]]
             if tr.robot_speed[k] > 0:
                 r["speed"] = tr.robot_speed[k]
+            if tr.home(k) != tr.robot_site[k]:
+                r["home"] = tr.sites[tr.home(k)]
         for k, t in enumerate(out["tasks"]):
             a, b = tr.sites[tr.task_from[k]], tr.sites[tr.task_to[k]]
             t.update({"site": a} if a == b else {"from": a, "to": b})

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from lvws_ros.core.subteams import BoolArray, FloatArray, shortfall
+from lvws_ros.core.subteams import BoolArray, FloatArray, covers, shortfall
 from lvws_ros.core.travel import Travel
 from lvws_ros.errors import InstanceError
 
@@ -33,12 +33,18 @@ MAX_VALUE = 1e9
 SITE_PREFIX = "@"
 
 
+# Additive traits (formats.md, "Traits"): at most this many per instance.
+MAX_TRAITS = 256
+OBJECTIVES = ("makespan", "return")  # the last task's end; the last robot home
+
+
 @dataclass(frozen=True)
 class Robot:
     id: str
     capabilities: tuple[int, ...]
     payload: float
     extra: Mapping[str, Any] = field(default_factory=dict, compare=False)
+    traits: tuple[tuple[str, float], ...] = ()  # (trait, amount): what it brings to a subteam's sums
 
 
 @dataclass(frozen=True)
@@ -49,6 +55,8 @@ class Task:
     duration: float
     after: tuple[str, ...] = ()
     extra: Mapping[str, Any] = field(default_factory=dict, compare=False)
+    requires: tuple[tuple[str, float], ...] = ()  # (trait, amount) its subteam's members add up to
+    roles: bool | None = None  # each member counts toward one required trait; None: the instance's
 
 
 @dataclass(frozen=True)
@@ -60,6 +68,9 @@ class Instance:
     robots: tuple[Robot, ...]
     tasks: tuple[Task, ...]
     travel: Travel | None = None  # the travel extension (formats.md); None: zero travel
+    traits: tuple[str, ...] = ()  # additive traits (formats.md, "Traits"), beside the capabilities
+    objective: str = "makespan"  # "return": the makespan ends when the last robot is home
+    roles: bool = False  # the default of each task's ``roles``
 
     def __post_init__(self) -> None:
         validate_instance(self)
@@ -94,6 +105,28 @@ class Instance:
     def skill_columns(self) -> tuple[int, ...]:
         """Capability columns that are skills, not sites (see SITE_PREFIX)."""
         return tuple(k for k, name in enumerate(self.capabilities) if not name.startswith(SITE_PREFIX))
+
+    @cached_property
+    def cover_names(self) -> tuple[str, ...]:
+        """The columns of :attr:`robot_amounts` and :attr:`task_needs`: capabilities, then traits."""
+        return tuple(self.capabilities) + tuple(self.traits)
+
+    @cached_property
+    def robot_amounts(self) -> FloatArray:
+        """N x (K + L): each capability as an amount of 0 or 1, then each trait's amount;
+        what :mod:`~lvws_ros.core.subteams`' coverage rule sums over a subteam."""
+        return np.hstack([self.robot_caps.astype(np.float64), _amounts([r.traits for r in self.robots], self.traits)])
+
+    @cached_property
+    def task_needs(self) -> FloatArray:
+        """M x (K + L): each needed capability as 1 (the OR of Eq. 10 is a sum reaching 1),
+        then each trait's requirement."""
+        return np.hstack([self.task_caps.astype(np.float64), _amounts([t.requires for t in self.tasks], self.traits)])
+
+    @cached_property
+    def task_roles(self) -> BoolArray:
+        """(M,): the tasks whose members each count toward one required trait only."""
+        return np.array([self.roles if t.roles is None else t.roles for t in self.tasks], dtype=bool)
 
     @cached_property
     def robot_payload(self) -> FloatArray:
@@ -159,6 +192,15 @@ class Instance:
         return _topological_order(self)
 
 
+def _amounts(rows: Sequence[Sequence[tuple[str, float]]], names: Sequence[str]) -> FloatArray:
+    col = {name: k for k, name in enumerate(names)}
+    out = np.zeros((len(rows), len(names)), dtype=np.float64)
+    for i, row in enumerate(rows):
+        for name, amount in row:
+            out[i, col[name]] = amount
+    return out
+
+
 def _caps_matrix(rows: Sequence[Sequence[int]], k: int) -> BoolArray:
     if not rows:
         return np.zeros((0, k), dtype=bool)
@@ -210,10 +252,11 @@ def validate_instance(inst: Instance) -> None:
     k = len(inst.capabilities)
     if not all(isinstance(c, str) and c for c in inst.capabilities):
         raise InstanceError(f"capabilities: names must be non-empty strings, got {_short(list(inst.capabilities))}")
-    if k < 1:
-        raise InstanceError("capabilities: at least one capability name is needed")
+    if k < 1 and not inst.traits:
+        raise InstanceError("capabilities: at least one capability name (or a trait) is needed")
     if len(set(inst.capabilities)) != k:
         raise InstanceError(f"capabilities: duplicate names in {list(inst.capabilities)}")
+    _check_traits(inst)
     if not inst.robots:
         raise InstanceError("robots: the team is empty")
     _no_duplicates([r.id for r in inst.robots], "robot")
@@ -230,12 +273,17 @@ def validate_instance(inst: Instance) -> None:
             raise InstanceError(f"robot {bad[0]!r} speed: must be between {1 / MAX_VALUE:g} and {MAX_VALUE:g}")
     for r in inst.robots:
         _check_vector(r.capabilities, k, f"robot {r.id!r} capabilities")
-        _check_number(r.payload, f"robot {r.id!r} payload", positive=True)
+        _check_number(r.payload, f"robot {r.id!r} payload", positive=not inst.traits)
+        _check_amounts(r.traits, inst.traits, f"robot {r.id!r} traits")
     task_ids = {t.id for t in inst.tasks}
     for t in inst.tasks:
         _check_vector(t.capabilities, k, f"task {t.id!r} capabilities")
-        if not any(t.capabilities):
-            raise InstanceError(f"task {t.id!r} capabilities: needs at least one capability")
+        _check_amounts(t.requires, inst.traits, f"task {t.id!r} requires")
+        if not any(t.capabilities) and not any(a > 0 for _, a in t.requires):
+            raise InstanceError(f"task {t.id!r} capabilities: needs at least one capability"
+                                + (" or trait" if inst.traits else ""))
+        if t.roles is not None and not isinstance(t.roles, bool):
+            raise InstanceError(f"task {t.id!r} roles: expected true or false, got {_short(t.roles)}")
         _check_number(t.payload, f"task {t.id!r} payload", positive=False)
         _check_number(t.duration, f"task {t.id!r} duration", positive=True)
         if not isinstance(t.after, (tuple, list)) or not all(isinstance(p, str) for p in t.after):
@@ -248,18 +296,65 @@ def validate_instance(inst: Instance) -> None:
         if len(set(t.after)) != len(t.after):
             raise InstanceError(f"task {t.id!r} after: duplicate prerequisite ids")
     inst.__dict__["topological_order"] = _topological_order(inst)  # prime the cached_property
-    team_caps = inst.robot_caps.any(axis=0)
+    amounts = inst.robot_amounts
+    team = amounts.sum(axis=0)
     team_payload = float(inst.robot_payload.sum())
     for j, t in enumerate(inst.tasks):
-        missing, short = shortfall(team_caps, team_payload, inst.task_caps[j], t.payload)
-        if missing.any():
-            names = [inst.capabilities[c] for c in np.flatnonzero(missing)]
-            raise InstanceError(f"task {t.id!r} can never be covered: no robot has capability {names}")
+        missing, short = shortfall(team, team_payload, inst.task_needs[j], t.payload)
+        caps = [inst.cover_names[c] for c in np.flatnonzero(missing[:k])]
+        if caps:
+            raise InstanceError(f"task {t.id!r} can never be covered: no robot has capability {caps}")
+        for c in np.flatnonzero(missing[k:]):
+            raise InstanceError(f"task {t.id!r} can never be covered: needs {inst.traits[c]} "
+                                f"{inst.task_needs[j, k + c]:g}, the whole team has {team[k + c]:g}")
         if short > 0:
             raise InstanceError(
                 f"task {t.id!r} can never be covered: needs payload {t.payload}, "
                 f"the whole team carries {team_payload}"
             )
+        if inst.task_roles[j] and not covers(amounts, inst.robot_payload, inst.task_needs[j], t.payload, roles=True):
+            raise InstanceError(f"task {t.id!r} can never be covered: with roles (each member counts toward one "
+                                f"required trait) the whole team does not reach "
+                                f"{_needs_text(inst.cover_names, inst.task_needs[j])}")
+    if inst.objective not in OBJECTIVES:
+        raise InstanceError(f"objective: expected one of {list(OBJECTIVES)}, got {_short(inst.objective)}")
+    if not isinstance(inst.roles, bool):
+        raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
+
+
+def _needs_text(names: Sequence[str], need: FloatArray) -> str:
+    return "{" + ", ".join(f"{names[int(c)]}: {need[c]:g}" for c in np.flatnonzero(need > 0)) + "}"
+
+
+def _check_traits(inst: Instance) -> None:
+    names = inst.traits
+    if not isinstance(names, tuple) or not all(isinstance(c, str) and c for c in names):
+        raise InstanceError(f"traits: names must be non-empty strings, got {_short(list(names))}")
+    if len(names) > MAX_TRAITS:
+        raise InstanceError(f"traits: at most {MAX_TRAITS} traits, got {len(names)}")
+    if len(set(names)) != len(names):
+        raise InstanceError(f"traits: duplicate names in {_short(list(names))}")
+    both = sorted(set(names) & set(inst.capabilities))
+    if both:
+        raise InstanceError(f"traits: {both} also named as capabilities (a name is one or the other)")
+
+
+def _check_amounts(pairs: Any, names: Sequence[str], what: str) -> None:
+    """(trait, amount) pairs: known traits, each once, amounts in [0, MAX_VALUE]."""
+    if not isinstance(pairs, tuple):
+        raise InstanceError(f"{what}: expected trait amounts, got {_short(pairs)}")
+    known = set(names)
+    seen: set[str] = set()
+    for pair in pairs:
+        if not (isinstance(pair, tuple) and len(pair) == 2 and isinstance(pair[0], str)):
+            raise InstanceError(f"{what}: expected (trait, amount) pairs, got {_short(pair)}")
+        name, amount = pair
+        if name not in known:
+            raise InstanceError(f"{what}: unknown trait {_short(name)} (traits: {_short(list(names))})")
+        if name in seen:
+            raise InstanceError(f"{what}: trait {name!r} given twice")
+        seen.add(name)
+        _check_number(amount, f"{what}.{name}", positive=False)
 
 
 def _no_duplicates(ids: Sequence[str], kind: str) -> None:

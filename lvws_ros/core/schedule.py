@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import TOLERANCE, shortfall
+from lvws_ros.core.subteams import TOLERANCE, role_cover, role_shortfall, shortfall
 
 
 @dataclass(frozen=True)
@@ -39,18 +39,54 @@ class Schedule:
     @classmethod
     def from_assignments(
         cls,
-        instance: str,
+        instance: Instance | str,
         policy: str,
         assignments: Sequence[Assignment],
         decisions: int = 0,
         compute_seconds: float = 0.0,
     ) -> Schedule:
+        """A schedule of ``assignments``; its makespan by the instance's objective (given
+        only a name: the largest end)."""
         ordered = sorted(assignments, key=lambda a: (a.start, a.task))
-        makespan = max((a.end for a in ordered), default=0.0)
-        return cls(instance, policy, ordered, makespan, decisions, compute_seconds)
+        if isinstance(instance, Instance):
+            return cls(instance.name, policy, ordered, makespan(instance, ordered), decisions, compute_seconds)
+        return cls(instance, policy, ordered, max((a.end for a in ordered), default=0.0), decisions, compute_seconds)
 
     def by_task(self) -> dict[str, Assignment]:
         return {a.task: a for a in self.assignments}
+
+
+def home_times(inst: Instance, assignments: Sequence[Assignment]) -> dict[str, tuple[float, str]]:
+    """Robot id -> (when it is back home, how: the task it comes from and the travel),
+    for the robots not home at the largest end of ``assignments`` (objective "return";
+    without travel every robot is home when its last task ends)."""
+    tr = inst.travel
+    if tr is None:
+        return {}
+    last: dict[str, Assignment] = {}
+    for a in assignments:
+        for r in a.robots:
+            if r in inst.robot_index and a.task in inst.task_index and (r not in last or a.end > last[r].end):
+                last[r] = a
+    out = {}
+    for k, robot in enumerate(inst.robots):
+        home = tr.home(k)
+        prev = last.get(robot.id)
+        site, free = (tr.robot_site[k], 0.0) if prev is None else (tr.task_to[inst.task_index[prev.task]], prev.end)
+        if site != home:
+            move = tr.time(k, site, home)
+            before = "its start" if prev is None else f"end of {prev.task!r} at {free:g}"
+            out[robot.id] = (free + move, f"{before} + {move:g} s from {tr.sites[site]} to {tr.sites[home]}")
+    return out
+
+
+def makespan(inst: Instance, assignments: Sequence[Assignment]) -> float:
+    """The objective of ``inst``: the largest end; with ``"objective": "return"``, when the
+    last robot is back home (formats.md, rule 8)."""
+    latest = max((a.end for a in assignments), default=0.0)
+    if inst.objective != "return":
+        return latest
+    return max([latest, *(t for t, _ in home_times(inst, assignments).values())])
 
 
 @dataclass(frozen=True)
@@ -121,15 +157,25 @@ def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[
     for a in by_task.values():
         t = inst.tasks[inst.task_index[a.task]]
         members = [inst.robot_index[r] for r in a.robots if r in inst.robot_index]
-        # Rule 2: capability OR covers the task, payloads add up (Eqs. 10-11).
-        caps = inst.robot_caps[members].any(axis=0)
+        # Rule 2: the subteam covers the task (Eqs. 10-11: capabilities, payload; traits add up).
+        j = inst.task_index[a.task]
+        have = inst.robot_amounts[members].sum(axis=0)
         carried = float(inst.robot_payload[members].sum())
-        missing, short = shortfall(caps, carried, inst.task_caps[inst.task_index[a.task]], t.payload)
-        if missing.any():
-            names = [inst.capabilities[c] for c in np.flatnonzero(missing)]
+        missing, short = shortfall(have, carried, inst.task_needs[j], t.payload)
+        k = len(inst.capabilities)
+        if missing[:k].any():
+            names = [inst.capabilities[c] for c in np.flatnonzero(missing[:k])]
             v.append(Violation(2, f"task {t.id!r}: subteam {list(a.robots)} lacks capability {names}"))
+        for c in np.flatnonzero(missing[k:]):
+            v.append(Violation(2, f"task {t.id!r}: subteam {list(a.robots)} has {inst.traits[c]} {have[k + c]:g} "
+                                  f"< needed {inst.task_needs[j, k + c]:g}"))
         if short > 0:
             v.append(Violation(2, f"task {t.id!r}: subteam payload {carried:g} < needed {t.payload:g}"))
+        if inst.task_roles[j] and not missing.any() and not role_cover(inst.robot_amounts[members], inst.task_needs[j]):
+            lack = role_shortfall(inst.robot_amounts[members], inst.task_needs[j])
+            names = [inst.cover_names[c] for c in np.flatnonzero(lack)]
+            v.append(Violation(2, f"task {t.id!r}: with roles (each member counts toward one trait) subteam "
+                                  f"{list(a.robots)} falls short of {names}"))
         # Rule 3: duration and start. Every comparison is written "violated unless it holds",
         # so that NaN (for which every comparison is False) is a violation, never a pass.
         if not (math.isfinite(a.start) and math.isfinite(a.end)):
@@ -161,8 +207,19 @@ def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[
     # the travel between them (a subteam starts when its slowest member can be there).
     if inst.travel is not None:
         v += _rule7(inst, per_robot, tol)
-    # Rule 6: makespan is the largest end.
+    # Rule 6: makespan is the largest end; with the objective "return", rule 8: every robot
+    # is home by the makespan, and the makespan is when the last one is.
     latest = max((a.end for a in s.assignments), default=0.0)
+    if inst.objective == "return":
+        home = home_times(inst, [a for a in s.assignments if math.isfinite(a.end)])
+        for rid, (back, how) in sorted(home.items()):
+            if not back <= s.makespan + tol:
+                v.append(Violation(8, f"robot {rid!r} is not home in time: back at {back:g} ({how}), "
+                                      f"after the makespan {s.makespan:g}"))
+        latest = max([latest, *(t for t, _ in home.values())])
+        if not abs(s.makespan - latest) <= tol:
+            v.append(Violation(6, f"makespan {s.makespan:g} != when the last robot is home {latest:g}"))
+        return v
     if not abs(s.makespan - latest) <= tol:
         v.append(Violation(6, f"makespan {s.makespan:g} != largest end {latest:g}"))
     return v

@@ -1,8 +1,17 @@
-"""Subteam coverage (the constraints of Eqs. 10-11): the one coverage test and the one
-tolerance of lvws_ros.
+"""Subteam coverage (the constraints of Eqs. 10-11, generalised to additive traits): the
+one coverage test and the one tolerance of lvws_ros.
 
-A subteam covers a task when the element-wise OR of its capability vectors has every
-capability the task needs (Eq. 10) and its payloads add up to the task's need (Eq. 11).
+The rule: robots bring *amounts* of traits and tasks *require* amounts; a subteam covers a
+task when, for every trait, its members' amounts add up to the requirement, and its
+payloads add up to the task's payload (Eq. 11). The paper's model is the special case
+where each capability is a trait of amount 0 or 1 required 0 or 1 times: a sum of 0/1
+amounts reaches 1 exactly when their OR is 1 (Eq. 10). So the "capability" arrays below
+hold amounts (booleans are amounts of 0 and 1) and the "team" arrays their sums.
+
+With *roles* (the multi-skill project scheduling rule) each member counts toward one
+required trait only: the subteam covers when its members can be assigned to the traits
+(each to at most one) so that every trait's assigned amounts add up (:func:`role_cover`).
+
 Because a task's duration does not depend on who does it, only *inclusion-minimal*
 covering subteams matter: any superset only ties up more robots.
 
@@ -14,6 +23,7 @@ instance validation, the network's pair features) asks :func:`shortfall`,
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -22,6 +32,7 @@ __all__ = [
     "COVER_CHUNK",
     "MAX_ENUMERATED",
     "TOLERANCE",
+    "AmountArray",
     "BoolArray",
     "FloatArray",
     "covered",
@@ -30,6 +41,8 @@ __all__ = [
     "fewest_carriers",
     "helps",
     "minimal_subteams",
+    "role_cover",
+    "role_shortfall",
     "shortfall",
     "shortlist",
     "team_candidates",
@@ -37,6 +50,7 @@ __all__ = [
 
 BoolArray = npt.NDArray[np.bool_]
 FloatArray = npt.NDArray[np.float64]
+AmountArray = npt.NDArray[Any]  # trait amounts: float, or bool for 0/1 capabilities
 IntArray = npt.NDArray[np.int64]
 
 # The one tolerance: payload sums and times within it count as equal (formats.md
@@ -47,39 +61,102 @@ SEED_EVERY_HOLDER = 8  # lightest_cover seeds with every capability holder up to
 
 
 def shortfall(team_caps: npt.ArrayLike, team_payload: npt.ArrayLike, need_caps: npt.ArrayLike,
-              need_payload: npt.ArrayLike) -> tuple[BoolArray, FloatArray]:
+              need_payload: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
     """What a subteam lacks for a task, broadcast over leading axes.
 
-    ``team_caps`` (..., K) is the OR of the members' capability vectors and
-    ``team_payload`` (...) the sum of their payloads; ``need_caps`` (..., K) and
-    ``need_payload`` (...) are the task's. Returns the capabilities still missing
-    (..., K) (Eq. 10) and the payload still missing (...), 0 when met within
-    TOLERANCE (Eq. 11).
+    ``team_caps`` (..., K) is the sum of the members' amounts (for 0/1 capabilities their
+    OR gives the same answer) and ``team_payload`` (...) the sum of their payloads;
+    ``need_caps`` (..., K) and ``need_payload`` (...) are the task's. Returns the amount
+    of each trait still missing (..., K) (Eq. 10: a missing capability is 1) and the
+    payload still missing (...), 0 where met within TOLERANCE (Eq. 11).
     """
-    missing = np.asarray(need_caps, dtype=bool) & ~np.asarray(team_caps, dtype=bool)
+    missing = np.asarray(need_caps, dtype=np.float64) - np.asarray(team_caps, dtype=np.float64)
     short = np.asarray(need_payload, dtype=np.float64) - np.asarray(team_payload, dtype=np.float64)
-    return missing, np.where(short <= TOLERANCE, 0.0, short)  # NaN stays NaN: not covered
+    # NaN stays NaN: not covered
+    return np.where(missing <= TOLERANCE, 0.0, missing), np.where(short <= TOLERANCE, 0.0, short)
 
 
 def covered(team_caps: npt.ArrayLike, team_payload: npt.ArrayLike, need_caps: npt.ArrayLike,
             need_payload: npt.ArrayLike) -> BoolArray:
-    """Eqs. 10-11, broadcast like :func:`shortfall`: True where nothing is missing."""
+    """Eqs. 10-11, broadcast like :func:`shortfall`: True where nothing is missing (without
+    roles; with roles this is a necessary condition, :func:`covers` the rule)."""
     missing, short = shortfall(team_caps, team_payload, need_caps, need_payload)
-    return np.asarray(~missing.any(axis=-1) & (short == 0.0))
+    return np.asarray((missing == 0.0).all(axis=-1) & (short == 0.0))
 
 
-def covers(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float) -> bool:
-    """Eqs. 10-11 for the robots whose capability rows (n, K) and payloads (n,) are given."""
-    return bool(covered(caps.any(axis=0), payloads.sum(), need_caps, need_payload))
+def covers(caps: npt.ArrayLike, payloads: FloatArray, need_caps: npt.ArrayLike, need_payload: float,
+           roles: bool = False) -> bool:
+    """The coverage rule for the robots whose amount rows (n, K) and payloads (n,) are
+    given: sums reach the needs (Eqs. 10-11); with ``roles``, by members that each count
+    toward one trait (:func:`role_cover`)."""
+    caps = np.asarray(caps, dtype=np.float64)
+    if not covered(caps.sum(axis=0), payloads.sum(), need_caps, need_payload):
+        return False
+    return not roles or role_cover(caps, need_caps)
+
+
+def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
+    """Whether the members (amount rows (n, K)) can each be given at most one of the
+    required traits so that every trait's given amounts add up to its need: the
+    multi-skill project scheduling rule (a worker fills one skill slot of an activity).
+    A depth-first search over the members (the most constrained first, the largest
+    contribution tried first), pruned by what the members left can still bring and by
+    the remaining needs already seen. Exponential in the worst case (with general amounts
+    the problem is NP-hard), fast for subteams of tens of robots."""
+    caps = np.atleast_2d(np.asarray(caps, dtype=np.float64))
+    need_all = np.asarray(need_caps, dtype=np.float64)
+    cols = np.flatnonzero(need_all > TOLERANCE)
+    a, need = caps[:, cols], need_all[cols]
+    a = a[(a > 0).any(axis=1)]
+    if not len(need):
+        return True
+    a = a[np.argsort((a > 0).sum(axis=1), kind="stable")]
+    rest = np.vstack([np.cumsum(a[::-1], axis=0)[::-1], np.zeros((1, len(need)))])  # what rows i.. bring
+    seen: set[tuple[int, bytes]] = set()
+    stack = [(0, need)]
+    while stack:
+        i, left = stack.pop()
+        if (left <= TOLERANCE).all():
+            return True
+        if i == len(a) or (rest[i] < left - TOLERANCE).any():
+            continue
+        key = (i, np.round(np.maximum(left, 0.0), 9).tobytes())
+        if key in seen:
+            continue
+        seen.add(key)
+        stack.append((i + 1, left))  # this member fills no slot (tried last)
+        useful = np.flatnonzero((a[i] > 0) & (left > TOLERANCE))
+        for k in useful[np.argsort(np.minimum(a[i, useful], left[useful]), kind="stable")]:
+            nxt = left.copy()
+            nxt[k] -= a[i, k]
+            stack.append((i + 1, nxt))  # the largest contribution is popped first
+    return False
+
+
+def role_shortfall(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> FloatArray:
+    """(K,): what the members still lack with roles: zero when :func:`role_cover` holds,
+    else what is left after giving each member, in turn, the trait it fills most of."""
+    need = np.asarray(need_caps, dtype=np.float64)
+    caps = np.atleast_2d(np.asarray(caps, dtype=np.float64))
+    if role_cover(caps, need):
+        return np.zeros_like(need)
+    left = need.copy()
+    for row in caps:
+        gain = np.minimum(row, np.maximum(left, 0.0))
+        if gain.max() > TOLERANCE:
+            k = int(np.argmax(gain))
+            left[k] -= row[k]
+    return np.where(left <= TOLERANCE, 0.0, left)  # not all zero: that would be a role cover
 
 
 COVER_CHUNK = 1 << 22  # earliest_cover: robots x tasks x max(capabilities, 8) per chunk of tasks
 
 
-def earliest_cover(times: FloatArray, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
+def earliest_cover(times: FloatArray, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
                    need_payload: FloatArray) -> FloatArray:
     """(m,): for each task j the least t at which the robots with ``times[:, j] <= t``
-    together cover it (Eqs. 10-11), inf when all those with a finite time do not.
+    together cover it (Eqs. 10-11, without roles: a lower bound with them), inf when all
+    those with a finite time do not.
     ``times`` (n, m) (inf: never), ``caps`` (n, K), ``payloads`` (n,), ``need_caps``
     (m, K), ``need_payload`` (m,). O(n log n + n K) per task, in chunks of tasks."""
     n, m = times.shape
@@ -91,7 +168,7 @@ def earliest_cover(times: FloatArray, caps: BoolArray, payloads: FloatArray, nee
         cols = slice(lo, min(m, lo + step))
         order = np.argsort(times[:, cols], axis=0, kind="stable")  # (n, c): soonest first
         soon = np.take_along_axis(times[:, cols], order, axis=0)
-        have = np.logical_or.accumulate(caps[order], axis=0)  # (n, c, K): the first k robots' capabilities
+        have = np.cumsum(caps[order], axis=0, dtype=np.float64)  # (n, c, K): the first k robots' amounts
         load = np.cumsum(payloads[order], axis=0)
         ok = covered(have, load, need_caps[None, cols], need_payload[None, cols]) & np.isfinite(soon)
         first = ok.argmax(axis=0)
@@ -106,15 +183,15 @@ def fewest_carriers(robot_payload: FloatArray, need_payload: FloatArray) -> IntA
     return np.searchsorted(ordered, np.asarray(need_payload, dtype=np.float64) - TOLERANCE).astype(np.int64) + 1
 
 
-def helps(robot_caps: BoolArray, need_caps: BoolArray, need_payload: FloatArray) -> BoolArray:
-    """(n, m): robot i can contribute to task j, i.e. holds a capability j still needs,
-    or j still needs payload (any robot carries some)."""
-    shared = robot_caps.astype(np.int32) @ need_caps.T.astype(np.int32) > 0
+def helps(robot_caps: AmountArray, need_caps: AmountArray, need_payload: FloatArray) -> BoolArray:
+    """(n, m): robot i can contribute to task j, i.e. holds a trait (capability) j still
+    needs, or j still needs payload (any robot carries some)."""
+    shared = (np.asarray(robot_caps) > 0).astype(np.int32) @ (np.asarray(need_caps) > TOLERANCE).T.astype(np.int32) > 0
     return np.asarray(shared | (np.asarray(need_payload) > TOLERANCE)[None, :])
 
 
-def prune(team: list[int], caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
-          keep: int | None = None) -> list[int]:
+def prune(team: list[int], caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
+          keep: int | None = None, roles: bool = False) -> list[int]:
     """Drop members while the rest still covers, in ``team``'s order (``keep`` never):
     the result covers and, but for ``keep``, is inclusion-minimal. O(t^2 K) for t members."""
     out = list(team)
@@ -122,35 +199,59 @@ def prune(team: list[int], caps: BoolArray, payloads: FloatArray, need_caps: Boo
         if q == keep or len(out) == 1:
             continue
         rest = [x for x in out if x != q]
-        if covers(caps[rest], payloads[rest], need_caps, need_payload):
+        if covers(caps[rest], payloads[rest], need_caps, need_payload, roles):
             out = rest
     return out
 
 
-def grow(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
-         start: Sequence[int] = (), order: IntArray | None = None, fill: str = "single") -> list[int] | None:
+def _gain(caps: FloatArray, missing: FloatArray, need: FloatArray) -> FloatArray:
+    """(n,): how much of what is missing each robot brings, each trait as a share of its
+    need (for 0/1 capabilities: how many missing capabilities it holds)."""
+    share = np.minimum(caps, missing[None, :]) / np.where(need > TOLERANCE, need, 1.0)[None, :]
+    return np.asarray(share.sum(axis=1), dtype=np.float64)
+
+
+def grow(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
+         start: Sequence[int] = (), order: IntArray | None = None, fill: str = "single",
+         roles: bool = False) -> list[int] | None:
     """Add robots to ``start`` until the team covers the task, or None when all of them
-    cannot (Eqs. 10-11). Capabilities first: the robot adding the most missing ones, the
-    first in ``order`` (default: lightest payload first) on ties; then payload, with
-    ``fill`` "single": the lightest robot that fills what is missing alone, else the
-    heaviest one; "ascending": the lightest robots first. O(n t K)."""
+    cannot (Eqs. 10-11). Traits (capabilities) first: the robot bringing the most of what
+    is missing (:func:`_gain`), the first in ``order`` (default: lightest payload first)
+    on ties; then payload, with ``fill`` "single": the lightest robot that fills what is
+    missing alone, else the heaviest one; "ascending": the lightest robots first. With
+    ``roles``, what the members lack once each counts toward one trait is filled the same
+    way. O(n t K)."""
     n = len(caps)
     rank = np.empty(n, dtype=np.int64)
     rank[np.argsort(payloads, kind="stable") if order is None else order] = np.arange(n)
     team = list(start)
     used = np.zeros(n, dtype=bool)
     used[team] = True
-    caps_i = caps.astype(np.int32)
-    missing = shortfall(caps[team].any(axis=0), 0.0, need_caps, 0.0)[0]
+    amounts = np.asarray(caps, dtype=np.float64)
+    need = np.asarray(need_caps, dtype=np.float64)
+
+    def lacking() -> FloatArray:
+        missing = shortfall(amounts[team].sum(axis=0), 0.0, need, 0.0)[0]
+        if roles and not missing.any() and team:
+            return role_shortfall(amounts[team], need)
+        return missing
+
+    missing = lacking()
     while missing.any():
-        gain = np.where(used, -1, caps_i @ missing.astype(np.int32))
-        best = int(gain.max())
+        gain = np.where(used, -1.0, _gain(amounts, missing, need))
+        best = float(gain.max())
+        if best <= 0 and roles:  # what the members lack may come from a new assignment: every helper joins
+            team += [int(i) for i in np.flatnonzero(~used & ((amounts > 0) & (need > TOLERANCE)).any(axis=1))]
+            used[team] = True
+            if lacking().any():
+                return None
+            break
         if best <= 0:
             return None
         pick = int(np.flatnonzero(gain == best)[np.argmin(rank[gain == best])])
         team.append(pick)
         used[pick] = True
-        missing = shortfall(caps[team].any(axis=0), 0.0, need_caps, 0.0)[0]
+        missing = lacking()
     short = float(shortfall(need_caps, payloads[team].sum(), need_caps, need_payload)[1])
     while short > 0:
         if used.all():
@@ -165,8 +266,8 @@ def grow(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_paylo
     return team
 
 
-def lightest_cover(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
-                   need_payload: float) -> tuple[int, ...] | None:
+def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
+                   need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
     """GRP's subteam: an inclusion-minimal covering subteam of small total payload (ties:
     fewer robots, then lower indices), or None when all of them cannot cover.
 
@@ -179,66 +280,71 @@ def lightest_cover(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
     lightest minimal subteam in 99.3 % of random small cases (a test holds it to 95 %),
     and GRP's makespans on the first 200 / 600 test instances of Datasets I / II equal
     those of the former exhaustive search in every schedule."""
-    if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload):
+    if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload, roles):
         return None
     options: list[list[int]] = []
-    alone = np.flatnonzero(covered(caps, payloads, need_caps[None, :], need_payload))
-    if len(alone):
-        options.append([int(alone[np.argmin(payloads[alone])])])
+    alone = [int(i) for i in np.flatnonzero(covered(caps, payloads, need_caps[None, :], need_payload))
+             if covers(caps[[i]], payloads[[i]], need_caps, need_payload, roles)]
+    if alone:
+        options.append([min(alone, key=lambda i: (float(payloads[i]), i))])
     heaviest_first = list(np.argsort(-payloads, kind="stable"))
     seeds: list[int | None] = [None]
-    if len(caps) <= SEED_EVERY_HOLDER:  # every holder of a needed capability
-        seeds += [int(i) for i in np.flatnonzero((caps & need_caps).any(axis=1))]
-    else:  # the lightest holder of each needed capability
-        for c in np.flatnonzero(need_caps):
-            holders = np.flatnonzero(caps[:, c])
+    holds = (np.asarray(caps) > 0) & (np.asarray(need_caps) > TOLERANCE)[None, :]
+    if len(caps) <= SEED_EVERY_HOLDER:  # every holder of a needed capability (trait)
+        seeds += [int(i) for i in np.flatnonzero(holds.any(axis=1))]
+    else:  # the lightest holder of each needed capability (trait)
+        for c in np.flatnonzero(holds.any(axis=0)):
+            holders = np.flatnonzero(holds[:, c])
             seeds.append(int(holders[np.argmin(payloads[holders])]))
     for seed in dict.fromkeys(seeds):
         for fill in ("single", "ascending"):
-            team = grow(caps, payloads, need_caps, need_payload, () if seed is None else (seed,), fill=fill)
+            team = grow(caps, payloads, need_caps, need_payload, () if seed is None else (seed,), fill=fill,
+                        roles=roles)
             if team is not None:
-                options.append(prune(sorted(team, key=heaviest_first.index), caps, payloads, need_caps, need_payload))
+                options.append(prune(sorted(team, key=heaviest_first.index), caps, payloads, need_caps, need_payload,
+                                     roles=roles))
     best = min(options, key=lambda t: (float(payloads[t].sum()), len(t), sorted(t)))
     return tuple(sorted(best))
 
 
-def random_cover(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
-                 rng: np.random.Generator) -> tuple[int, ...] | None:
+def random_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
+                 rng: np.random.Generator, roles: bool = False) -> tuple[int, ...] | None:
     """A random inclusion-minimal covering subteam (RAND w/ subteams), or None: robots
     join in a random order until the team covers, then members leave in a random order
     while it still does. O(n t K)."""
-    if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload):
+    if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload, roles):
         return None
     order = rng.permutation(len(caps))
     team: list[int] = []
     for i in order:
-        if (caps[i] & need_caps).any() or need_payload > TOLERANCE:
+        if ((caps[i] > 0) & (need_caps > TOLERANCE)).any() or need_payload > TOLERANCE:
             team.append(int(i))
-            if covers(caps[team], payloads[team], need_caps, need_payload):
+            if covers(caps[team], payloads[team], need_caps, need_payload, roles):
                 break
-    team = prune([team[k] for k in rng.permutation(len(team))], caps, payloads, need_caps, need_payload)
+    team = prune([team[k] for k in rng.permutation(len(team))], caps, payloads, need_caps, need_payload,
+                 roles=roles)
     return tuple(sorted(team))
 
 
-def cover_with(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
-               member: int) -> tuple[int, ...] | None:
+def cover_with(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
+               member: int, roles: bool = False) -> tuple[int, ...] | None:
     """An inclusion-minimal covering subteam that includes ``member``, found
     constructively (grown from it, trimmed without it), or None when none is found:
     whether ``member`` could start the task now with other robots. O(n t K)."""
-    if not (caps[member] & need_caps).any() and need_payload <= TOLERANCE:
+    if not ((caps[member] > 0) & (need_caps > TOLERANCE)).any() and need_payload <= TOLERANCE:
         return None
-    team = grow(caps, payloads, need_caps, need_payload, (member,))
+    team = grow(caps, payloads, need_caps, need_payload, (member,), roles=roles)
     if team is None:
         return None
-    team = prune(team[::-1], caps, payloads, need_caps, need_payload, keep=member)
+    team = prune(team[::-1], caps, payloads, need_caps, need_payload, keep=member, roles=roles)
     rest = [x for x in team if x != member]
-    if rest and covers(caps[rest], payloads[rest], need_caps, need_payload):
+    if rest and covers(caps[rest], payloads[rest], need_caps, need_payload, roles):
         return None  # the member is not needed in the team found
     return tuple(sorted(team))
 
 
 def minimal_subteams(
-    caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float
+    caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float, roles: bool = False
 ) -> list[tuple[int, ...]]:
     """All inclusion-minimal covering subteams, as sorted index tuples into ``caps``.
 
@@ -252,8 +358,11 @@ def minimal_subteams(
         return []
     masks = np.arange(1 << n, dtype=np.int64)
     bits = ((masks[:, None] >> np.arange(n, dtype=np.int64)) & 1).astype(bool)  # (2^n, n)
-    cap_or = bits.astype(np.int32) @ caps.astype(np.int32) > 0  # (2^n, K)
-    feasible = covered(cap_or, bits @ payloads, need_caps, need_payload)
+    cap_sum = bits.astype(np.float64) @ np.asarray(caps, dtype=np.float64)  # (2^n, K)
+    feasible = covered(cap_sum, bits @ payloads, need_caps, need_payload)
+    if roles:
+        for m in np.flatnonzero(feasible):
+            feasible[m] = role_cover(caps[bits[m]], need_caps)
     minimal = feasible.copy()
     for i in range(n):
         has_i = bits[:, i]
@@ -261,23 +370,23 @@ def minimal_subteams(
     return [tuple(int(i) for i in np.flatnonzero(bits[m])) for m in np.flatnonzero(minimal)]
 
 
-def shortlist(caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, limit: int = MAX_ENUMERATED) -> list[int]:
+def shortlist(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, limit: int = MAX_ENUMERATED) -> list[int]:
     """Up to ``limit`` candidate robots for a task from a larger team.
 
     Keeps the robots holding the most needed capabilities, then the largest payloads;
     used by the baselines when more than MAX_ENUMERATED robots are free.
     """
-    useful = caps[:, need_caps].sum(axis=1) if need_caps.any() else np.zeros(len(caps))
+    useful = ((caps > 0) & (need_caps > TOLERANCE)[None, :]).sum(axis=1)
     order = np.lexsort((-payloads, -useful))
     return sorted(int(i) for i in order[:limit])
 
 
 def team_candidates(
-    caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float
+    caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float, roles: bool = False
 ) -> list[tuple[int, ...]]:
     """Minimal covering subteams among the given robots (shortlisted when many)."""
     if len(caps) <= MAX_ENUMERATED:
-        return minimal_subteams(caps, payloads, need_caps, need_payload)
+        return minimal_subteams(caps, payloads, need_caps, need_payload, roles)
     keep = shortlist(caps, payloads, need_caps)
-    teams = minimal_subteams(caps[keep], payloads[keep], need_caps, need_payload)
+    teams = minimal_subteams(caps[keep], payloads[keep], need_caps, need_payload, roles)
     return [tuple(keep[i] for i in team) for team in teams]

@@ -34,6 +34,11 @@ class Travel:
     robot_speed: tuple[float, ...]  # (N,) > 0, or 0: fixed
     task_from: tuple[int, ...]  # (M,) where the subteam meets
     task_to: tuple[int, ...]  # (M,) where the subteam is when the task is done
+    robot_home: tuple[int, ...] = ()  # (N,) where each robot returns (objective "return"); (): its start site
+
+    def home(self, robot: int) -> int:
+        """The site robot ``robot`` goes back to: its ``home``, or where it starts."""
+        return self.robot_home[robot] if self.robot_home else self.robot_site[robot]
 
     def time(self, robot: int, a: int, b: int) -> float:
         """Seconds robot ``robot`` needs from site a to site b (inf: a fixed robot elsewhere)."""
@@ -66,7 +71,7 @@ class Travel:
 
     def key(self) -> tuple[object, ...]:
         return (self.sites, self.coordinates, self.overrides, self.robot_site, self.robot_speed, self.task_from,
-                self.task_to)
+                self.task_to, self.robot_home)
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Travel) and self.key() == other.key()
@@ -90,9 +95,10 @@ def _coordinate(value: float, where: str) -> float:
 
 def build_travel(sites: Mapping[str, Sequence[float]], distances: Mapping[str, Mapping[str, float]],
                  robots: Sequence[tuple[str, str, float | None]],
-                 tasks: Sequence[tuple[str, str, str]]) -> Travel:
+                 tasks: Sequence[tuple[str, str, str]], homes: Sequence[str | None] = ()) -> Travel:
     """A checked :class:`Travel`. ``robots``: (id, site, speed or None for fixed);
-    ``tasks``: (id, from site, to site). InstanceError names the item."""
+    ``tasks``: (id, from site, to site); ``homes``: per robot its home site or None (its
+    start). InstanceError names the item."""
     names = tuple(sites)
     if not names:
         raise InstanceError("sites: at least one site is needed")
@@ -124,5 +130,11 @@ def build_travel(sites: Mapping[str, Sequence[float]], distances: Mapping[str, M
         robot_speed.append(0.0 if speed is None else _finite(speed, f"robot {rid!r} speed", True))
     task_from = [site(a, f"task {tid!r} site") for tid, a, _ in tasks]
     task_to = [site(b, f"task {tid!r} site") for tid, _, b in tasks]
+    home = [robot_site[k] if h is None else site(h, f"robot {robots[k][0]!r} home") for k, h in enumerate(homes)]
+    for k, h in enumerate(home):
+        if h != robot_site[k] and robot_speed[k] <= 0:
+            raise InstanceError(f"robot {robots[k][0]!r} home: a fixed robot (no speed) stays at its site "
+                                f"{names[robot_site[k]]!r}, it cannot go home to {names[h]!r}")
+    keep = tuple(home) if home != robot_site else ()  # () when every robot's home is its start
     return Travel(names, tuple(coords), dist, tuple(overrides), tuple(robot_site), tuple(robot_speed),
-                  tuple(task_from), tuple(task_to))
+                  tuple(task_from), tuple(task_to), keep)

@@ -110,7 +110,7 @@ def label_state(state: State, schedule: Schedule, gamma: float = GAMMA,
                 e[w, m] = gamma ** (((next_leave[w] if np.isfinite(next_leave[w]) else makespan) - t) / unit)
     ready = np.zeros(m, dtype=bool)
     ready[state.ready_tasks()] = True
-    x = feasibility_mask(inst.robot_caps, inst.task_caps, inst.robot_payload, inst.task_payload)
+    x = feasibility_mask(inst.robot_amounts, inst.task_needs, inst.robot_payload, inst.task_payload)
     x[:, :m] &= ready[None, :]
     if inst.travel is not None:  # with travel, only robots that can reach the task at all
         x[:, :m] &= state.reachable(range(n), range(m))

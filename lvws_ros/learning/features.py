@@ -96,8 +96,8 @@ class InstanceFeatures:
     def __init__(self, inst: Instance, read: int = PAIR_FEATURES) -> None:
         self.read = read
         n, m = inst.num_robots, inst.num_tasks
-        rc, tc = inst.robot_caps, inst.task_caps
-        skills = list(inst.skill_columns)  # counts and rarity: skills only, not sites ("@...")
+        rc, tc = inst.robot_amounts > 0, inst.task_needs > 0  # who holds / what needs each trait
+        skills = list(inst.skill_columns)  # counts and rarity: skills and traits only, not sites ("@...")
         rs, ts = rc[:, skills], tc[:, skills]
         k = max(len(skills), 1)
         self.instance = inst
@@ -110,9 +110,12 @@ class InstanceFeatures:
         critical = float(tail.max()) if m else 1.0
         holders = rs.sum(axis=0) / n  # (K,) share of robots holding each skill
         robot_rarity = np.where(rs, holders[None, :], 1.0).min(axis=1, initial=1.0)
-        help_ij = helps(rc, tc, inst.task_payload) if m else np.zeros((n, 0), bool)  # (N, M)
-        alone = covered(rc[:, None, :], inst.robot_payload[:, None], tc[None, :, :],
+        ra, tn = inst.robot_amounts, inst.task_needs
+        help_ij = helps(ra, tn, inst.task_payload) if m else np.zeros((n, 0), bool)  # (N, M)
+        alone = covered(ra[:, None, :], inst.robot_payload[:, None], tn[None, :, :],
                         inst.task_payload[None, :]) if m else np.zeros((n, 0), bool)
+        # with roles a robot alone fills one trait: it covers only tasks that need one
+        alone &= ~(inst.task_roles & ((tn > TOLERANCE).sum(axis=1) > 1))[None, :]
         self.robots = np.zeros((n, ROBOT_FEATURES), np.float32)
         self.robots[:, 2] = inst.robot_payload / self.payload_unit
         self.robots[:, 3] = rs.sum(axis=1) / k
@@ -210,7 +213,7 @@ class InstanceFeatures:
         ``wait[r]`` seconds (inf: never) from where it is when free."""
         inst = self.instance
         times = wait[:, None] + state.arrivals(np.arange(inst.num_robots), ready)
-        start = earliest_cover(times, inst.robot_caps, inst.robot_payload, inst.task_caps[ready],
+        start = earliest_cover(times, inst.robot_amounts, inst.robot_payload, inst.task_needs[ready],
                                inst.task_payload[ready])
         return start / self.time_unit
 

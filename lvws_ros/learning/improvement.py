@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from lvws_ros.core.executor import Decision, State, advance, schedule_from_state, simulate
+from lvws_ros.core.executor import Decision, State, advance, final_makespan, schedule_from_state, simulate
 from lvws_ros.core.families import TEST_OFFSET, family_instance
 from lvws_ros.core.formats import instance_key
 from lvws_ros.core.problem import Instance
@@ -144,7 +144,7 @@ def candidates(inst: Instance, policy: LVWSPolicy, cfg: ImproveConfig, rng: np.r
         plan = [p.decision for p in beam.search(start)]
         if plan:
             states, final = _replay(start, plan)
-            out.append(Candidate("beam", float(np.nanmax(final.task_end)), 0.0, states, plan, final))
+            out.append(Candidate("beam", final_makespan(final), 0.0, states, plan, final))
     if cfg.expert_time_limit > 0:
         from lvws_ros.policies.exact import ExactPolicy
 

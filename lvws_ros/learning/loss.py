@@ -18,7 +18,7 @@ import numpy.typing as npt
 import torch
 from torch import Tensor
 
-from lvws_ros.core.subteams import BoolArray, FloatArray, helps
+from lvws_ros.core.subteams import AmountArray, FloatArray, helps
 from lvws_ros.learning.features import GraphFeatures
 from lvws_ros.learning.gatn import NEG, Batch, collate, segment_softmax
 
@@ -47,7 +47,7 @@ class Targets:
         return Targets(**{k: v.to(device) for k, v in self.__dict__.items()})
 
 
-def feasibility_mask(robot_caps: BoolArray, task_caps: BoolArray, robot_payload: FloatArray,
+def feasibility_mask(robot_caps: AmountArray, task_caps: AmountArray, robot_payload: FloatArray,
                      task_payload: FloatArray) -> npt.NDArray[np.bool_]:
     """X of Eq. 12: robot i can help task j (has a needed capability, or the task needs
     payload); the idle column (last) is always feasible."""

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, advance, simulate
+from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, advance, final_makespan, simulate
 from lvws_ros.core.matching import Match, greedy_match
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
@@ -133,8 +133,8 @@ class LVWSPolicy:
             alone = np.zeros((len(robots), len(ready)), dtype=bool)
             alone[:, ready.index(only)] = True
             allowed = alone if allowed is None else allowed & alone
-        args = (inst.robot_caps[robots], inst.robot_payload[robots], inst.task_caps[ready], inst.task_payload[ready],
-                allowed)
+        args = (inst.robot_amounts[robots], inst.robot_payload[robots], inst.task_needs[ready], inst.task_payload[ready],
+                allowed, inst.task_roles[ready])
         match = self._match(sub, *args)
         if not match.teams and not (state.task_status == TaskStatus.ASSIGNED).any():
             _idle_last(sub)  # waiting now would stall: take the best task instead
@@ -143,14 +143,14 @@ class LVWSPolicy:
         return Decision(assignments, tuple(robots[i] for i in match.waiting))
 
     def _match(self, r: np.ndarray, robot_caps: np.ndarray, robot_payload: np.ndarray, task_caps: np.ndarray,
-               task_payload: np.ndarray, allowed: np.ndarray | None) -> Match:
+               task_payload: np.ndarray, allowed: np.ndarray | None, roles: np.ndarray) -> Match:
         """Eqs. 7-11 on ``r``: the paper's sequential greedy, or (``matching="exact"``) the
         maximum of Eq. 7 by CP-SAT (within EXACT_MATCH_SECONDS; its best when not proven)."""
         if self.matching == "greedy":
-            return greedy_match(r, robot_caps, robot_payload, task_caps, task_payload, allowed)
+            return greedy_match(r, robot_caps, robot_payload, task_caps, task_payload, allowed, roles)
         from lvws_ros.policies.exact import exact_match
 
-        return exact_match(r, robot_caps, robot_payload, task_caps, task_payload, allowed=allowed,
+        return exact_match(r, robot_caps, robot_payload, task_caps, task_payload, allowed=allowed, roles=roles,
                            time_limit=EXACT_MATCH_SECONDS, workers=1)
 
     def decide(self, state: State) -> Decision:
@@ -203,8 +203,9 @@ class DBGMPolicy:
             sub = np.concatenate([sub, np.zeros((len(rest_r), 1))], axis=1)
             _idle_last(sub)  # no idle task
             rr, tt = [free[a] for a in rest_r], [ready[b] for b in rest_t]
-            match = greedy_match(sub, inst.robot_caps[rr], inst.robot_payload[rr], inst.task_caps[tt],
-                                 inst.task_payload[tt], None if allowed is None else allowed[np.ix_(rest_r, rest_t)])
+            match = greedy_match(sub, inst.robot_amounts[rr], inst.robot_payload[rr], inst.task_needs[tt],
+                                 inst.task_payload[tt], None if allowed is None else allowed[np.ix_(rest_r, rest_t)],
+                                 inst.task_roles[tt])
             out += [(tt[j], tuple(rr[i] for i in team)) for j, team in match.teams.items()]
             used_r |= {rest_r[i] for team in match.teams.values() for i in team}
         return Decision(tuple(out), tuple(free[a] for a in range(len(free)) if a not in used_r))
@@ -238,7 +239,7 @@ def continue_after(state: State, decision: Decision, policy: Policy, deadline: f
     if s is None:
         return math.inf
     if s.done():
-        return float(np.nanmax(s.task_end))
+        return final_makespan(s)
     runner = policy if deadline is None else Until(policy, deadline)
     return float(simulate(state.instance, runner, state=s).schedule.makespan)
 

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, State, advance
+from lvws_ros.core.executor import Decision, State, advance, final_makespan
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import PolicyError
@@ -111,7 +111,7 @@ def sample_schedules(policy: LVWSPolicy, state: State, samples: int, temperature
             if nxt is None:  # the decision would stall the schedule
                 del states[k]
             elif nxt.done():
-                done[k] = Sampled(float(np.nanmax(nxt.task_end)), steps[k], seen[k] if record_states else None, nxt,
+                done[k] = Sampled(final_makespan(nxt), steps[k], seen[k] if record_states else None, nxt,
                                   liked[k])
                 del states[k]
             else:

@@ -50,6 +50,7 @@ from lvws_ros.core.executor import (
     State,
     advance,
     check_decision,
+    final_makespan,
     plan_step_near,
     simulate,
 )
@@ -199,7 +200,7 @@ class LVWSBeamPolicy:
                         here = [*path, _step(s, d)]
                         finishes: Iterator[tuple[float, list[PlannedStep]]]
                         if child.done():
-                            finishes = iter([(float(np.nanmax(child.task_end)), [])])
+                            finishes = iter([(final_makespan(child), [])])
                         else:
                             finishes = self._finishes(child, deadline)
                         score = math.inf

@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 from lvws_ros.core.executor import Decision, State
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import BoolArray, FloatArray, covered, lightest_cover, random_cover
+from lvws_ros.core.subteams import AmountArray, FloatArray, covered, covers, lightest_cover, random_cover
 
 
 class _SequentialPolicy:
@@ -42,8 +42,8 @@ class _SequentialPolicy:
     def order(self, ready: list[int]) -> list[int]:
         return ready
 
-    def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
-             need_payload: float) -> tuple[int, ...] | None:
+    def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
+             need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
         raise NotImplementedError
 
     @staticmethod
@@ -51,11 +51,11 @@ class _SequentialPolicy:
         """Seconds each free robot needs to reach ``task`` (zeros without travel)."""
         return state.arrivals(free, [task])[:, 0]
 
-    def pick_reachable(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
-                       arrival: FloatArray) -> tuple[int, ...] | None:
+    def pick_reachable(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
+                       arrival: FloatArray, roles: bool = False) -> tuple[int, ...] | None:
         """``pick`` among the robots that can reach the task at all."""
         ok = np.flatnonzero(np.isfinite(arrival))
-        team = self.pick(caps[ok], payloads[ok], need_caps, need_payload) if len(ok) else None
+        team = self.pick(caps[ok], payloads[ok], need_caps, need_payload, roles) if len(ok) else None
         return None if team is None else tuple(int(ok[i]) for i in team)
 
     def decide(self, state: State) -> Decision:
@@ -64,46 +64,47 @@ class _SequentialPolicy:
         order = np.array(self.order(state.ready_tasks()), dtype=np.int64)
         out = []
         # tasks the free robots together can cover, all at once (a subset covers no more)
-        possible = covered(inst.robot_caps[free].any(axis=0), inst.robot_payload[free].sum(),
-                           inst.task_caps[order], inst.task_payload[order])
+        possible = covered(inst.robot_amounts[free].sum(axis=0), inst.robot_payload[free].sum(),
+                           inst.task_needs[order], inst.task_payload[order])
         for k, task in enumerate(order):
             if not len(free):
                 break
             if not possible[k]:
                 continue
             if inst.travel is None:  # the paper's choice, untouched
-                team = self.pick(inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[task],
-                                 inst.tasks[task].payload)
+                team = self.pick(inst.robot_amounts[free], inst.robot_payload[free], inst.task_needs[task],
+                                 inst.tasks[task].payload, bool(inst.task_roles[task]))
             else:
-                team = self.pick_reachable(inst.robot_caps[free], inst.robot_payload[free], inst.task_caps[task],
-                                           inst.tasks[task].payload, self.arrivals(state, free, int(task)))
+                team = self.pick_reachable(inst.robot_amounts[free], inst.robot_payload[free], inst.task_needs[task],
+                                           inst.tasks[task].payload, self.arrivals(state, free, int(task)),
+                                           bool(inst.task_roles[task]))
             if team is None:
                 continue
             out.append((int(task), tuple(int(free[i]) for i in team)))
             free = np.delete(free, list(team))
             rest = order[k + 1:]
-            possible[k + 1:] = covered(inst.robot_caps[free].any(axis=0), inst.robot_payload[free].sum(),
-                                       inst.task_caps[rest], inst.task_payload[rest])
+            possible[k + 1:] = covered(inst.robot_amounts[free].sum(axis=0), inst.robot_payload[free].sum(),
+                                       inst.task_needs[rest], inst.task_payload[rest])
         return Decision(tuple(out), tuple(int(i) for i in free))
 
 
 class GreedyPayloadPolicy(_SequentialPolicy):
     name = "grp"
 
-    def pick_reachable(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray, need_payload: float,
-                       arrival: FloatArray) -> tuple[int, ...] | None:
+    def pick_reachable(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
+                       arrival: FloatArray, roles: bool = False) -> tuple[int, ...] | None:
         """The lightest subteam among the robots that are there soonest: robots arriving
         within each distinct arrival time in turn, the first that can cover wins."""
         for limit in np.unique(arrival[np.isfinite(arrival)]):
             near = np.flatnonzero(arrival <= limit)
-            team = self.pick(caps[near], payloads[near], need_caps, need_payload)
+            team = self.pick(caps[near], payloads[near], need_caps, need_payload, roles)
             if team is not None:
                 return tuple(int(near[i]) for i in team)
         return None
 
-    def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
-             need_payload: float) -> tuple[int, ...] | None:
-        return lightest_cover(caps, payloads, need_caps, need_payload)
+    def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
+             need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
+        return lightest_cover(caps, payloads, need_caps, need_payload, roles)
 
 
 class RandomPolicy(_SequentialPolicy):
@@ -112,17 +113,20 @@ class RandomPolicy(_SequentialPolicy):
     def order(self, ready: list[int]) -> list[int]:
         return [ready[i] for i in self.rng.permutation(len(ready))]
 
-    def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
-             need_payload: float) -> tuple[int, ...] | None:
+    def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
+             need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
         alone = np.flatnonzero(covered(caps, payloads, need_caps[None, :], need_payload))
+        if roles:
+            alone = np.array([i for i in alone if covers(caps[[i]], payloads[[i]], need_caps, need_payload, roles)],
+                             dtype=np.int64)
         if len(alone):
             return (int(alone[int(self.rng.integers(len(alone)))]),)
-        return random_cover(caps, payloads, need_caps, need_payload, self.rng)
+        return random_cover(caps, payloads, need_caps, need_payload, self.rng, roles)
 
 
 class RandomSubteamPolicy(RandomPolicy):
     name = "rand_subteam"
 
-    def pick(self, caps: BoolArray, payloads: FloatArray, need_caps: BoolArray,
-             need_payload: float) -> tuple[int, ...] | None:
-        return random_cover(caps, payloads, need_caps, need_payload, self.rng)
+    def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
+             need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
+        return random_cover(caps, payloads, need_caps, need_payload, self.rng, roles)

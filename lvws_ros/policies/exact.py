@@ -51,12 +51,13 @@ from lvws_ros.core.executor import (
     schedule_from_state,
     simulate,
 )
-from lvws_ros.core.matching import Match, check_shapes, match_reward
+from lvws_ros.core.matching import Match, check_shapes, greedy_match, match_reward
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import (
     MAX_ENUMERATED,
     TOLERANCE,
+    AmountArray,
     BoolArray,
     FloatArray,
     covers,
@@ -160,7 +161,7 @@ def _shift(inst: Instance, sched: Schedule, state: State | None) -> tuple[Schedu
         robot_free[robots] = stop
         leave[a.task] = float(depart)
         out.append(Assignment(a.task, a.robots, float(start), float(stop)))
-    return Schedule.from_assignments(inst.name, sched.policy, out, sched.decisions, sched.compute_seconds), leave
+    return Schedule.from_assignments(inst, sched.policy, out, sched.decisions, sched.compute_seconds), leave
 
 
 @dataclass
@@ -199,12 +200,14 @@ def _travel_times(inst: Instance, state: State) -> np.ndarray:
 
 
 def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon, start: dict[int, cp_model.IntVar],
-                member: dict[int, dict[int, cp_model.IntVar]]) -> None:
+                member: dict[int, dict[int, cp_model.IntVar]], makespan: cp_model.IntVar) -> None:
     """The executor's travel. Each task has a departure D_j: its subteam sets out once the
     task is ready and every member is free, and the task starts when the last member is
     there. Per robot, a circuit through its start (node 0) and the tasks it may do; its
     successor literals carry the travel between consecutive tasks (rounded up to ticks,
-    so a schedule of the model is valid in real time)."""
+    so a schedule of the model is valid in real time). With the objective "return" the arc
+    back to the start node carries the way home: the makespan is when the last robot is
+    home (an idle robot goes home from where it is when free)."""
     tr = inst.travel
     if tr is None or state.robot_site is None:
         return
@@ -219,12 +222,19 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
         model.add(start[j] >= depart[j])
         for p in inst.prerequisites[j]:  # ready when it sets out
             model.add(depart[j] >= (start[p] + h.dur[p] if p in h.dur else h.ticks(h.fixed_end[p])))
+    back = inst.objective == "return"
     for r in range(inst.num_robots):
         tasks = [j for j in h.todo if r in member[j]]
+        go_home = up(tr.time(r, int(site[r]), tr.home(r))) if back else 0
         if not tasks:
+            if back:
+                model.add(makespan >= h.free_at[r] + go_home)
             continue
         node = {j: k + 1 for k, j in enumerate(tasks)}
-        arcs: list[tuple[int, int, Any]] = [(0, 0, model.new_bool_var(f"idle_{r}"))]
+        idle = model.new_bool_var(f"idle_{r}")
+        arcs: list[tuple[int, int, Any]] = [(0, 0, idle)]
+        if back:
+            model.add(makespan >= h.free_at[r] + go_home).only_enforce_if(idle)
         for j in tasks:
             y = member[j][r]
             arcs.append((node[j], node[j], y.Not()))
@@ -233,7 +243,10 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
                 model.add(y == 0)
                 continue
             first = model.new_bool_var(f"first_{r}_{j}")
-            arcs += [(0, node[j], first), (node[j], 0, model.new_bool_var(f"last_{r}_{j}"))]
+            last = model.new_bool_var(f"last_{r}_{j}")
+            arcs += [(0, node[j], first), (node[j], 0, last)]
+            if back:
+                model.add(makespan >= start[j] + h.dur[j] + up(tr.time(r, tr.task_to[j], tr.home(r)))).only_enforce_if(last)
             model.add(depart[j] >= h.free_at[r]).only_enforce_if(first)
             model.add(start[j] >= depart[j] + up(reach)).only_enforce_if(first)
             for k in tasks:
@@ -255,7 +268,8 @@ def _coalitions(inst: Instance, todo: list[int]) -> dict[int, list[tuple[int, ..
         return None
     teams: dict[int, list[tuple[int, ...]]] = {}
     for j in todo:
-        teams[j] = minimal_subteams(inst.robot_caps, inst.robot_payload, inst.task_caps[j], inst.tasks[j].payload)
+        teams[j] = minimal_subteams(inst.robot_amounts, inst.robot_payload, inst.task_needs[j], inst.tasks[j].payload,
+                                    bool(inst.task_roles[j]))
         if not teams[j]:
             raise ExpertError(f"task {inst.tasks[j].id!r} has no covering subteam")
         if sum(len(t) for t in teams.values()) > COALITION_LIMIT:
@@ -289,8 +303,8 @@ def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule, coal
             lb = ticks(t0)
             for p in inst.prerequisites[j]:
                 lb = max(lb, head[p] + dur[p] if p in dur else ticks(fixed_end[p]))
-            for c in np.flatnonzero(inst.task_caps[j]):
-                lb = max(lb, int(free[inst.robot_caps[:, c]].min()))
+            for c in np.flatnonzero(inst.task_needs[j] > TOLERANCE):  # a holder of each needed trait
+                lb = max(lb, int(free[inst.robot_amounts[:, c] > 0].min()))
             if teams is not None:
                 lb = max(lb, min(max(free_at[r] for r in team) for team in teams[j]))
             head[j] = lb
@@ -341,7 +355,9 @@ def _build_model(inst: Instance, h: _Horizon) -> _Model:
     per_robot: list[list[cp_model.IntervalVar]] = [[] for _ in inst.robots]
     robot_count: dict[int, cp_model.IntVar] = {}
     payload_use: dict[int, cp_model.IntVar] = {}
-    cap_use: list[dict[int, cp_model.IntVar]] = [{} for _ in inst.capabilities]
+    cap_use: list[dict[int, cp_model.IntVar]] = [{} for _ in inst.cover_names]
+    whole = np.all(inst.robot_amounts == np.round(inst.robot_amounts), axis=0)  # traits in whole units
+    amount_int = np.round(inst.robot_amounts).astype(np.int64)
     pay_int = np.round(inst.robot_payload * 1000).astype(np.int64)
     member: dict[int, dict[int, cp_model.IntVar]] = {}
     for j in todo:
@@ -357,10 +373,10 @@ def _build_model(inst: Instance, h: _Horizon) -> _Model:
         # Cumulative demands must be single variables in CP-SAT.
         robot_count[j] = _demand(model, [len(team) for team in teams[j]], choice[j], f"n_{j}")
         payload_use[j] = _demand(model, [int(pay_int[list(team)].sum()) for team in teams[j]], choice[j], f"w_{j}")
-        for c in range(len(inst.capabilities)):
-            holders = [int(inst.robot_caps[list(team), c].sum()) for team in teams[j]]
+        for col in np.flatnonzero(whole):
+            holders = [int(amount_int[list(team), col].sum()) for team in teams[j]]
             if any(holders):
-                cap_use[c][j] = _demand(model, holders, choice[j], f"c{c}_{j}")
+                cap_use[col][j] = _demand(model, holders, choice[j], f"c{col}_{j}")
     _sequencing(model, inst, h, start, makespan, per_robot)
     ivs = [task_iv[j] for j in todo]
     model.add_cumulative(ivs, [robot_count[j] for j in todo], inst.num_robots)
@@ -368,33 +384,51 @@ def _build_model(inst: Instance, h: _Horizon) -> _Model:
     for c, demand_by_task in enumerate(cap_use):
         if demand_by_task:
             model.add_cumulative([task_iv[j] for j in demand_by_task], list(demand_by_task.values()),
-                                 int(inst.robot_caps[:, c].sum()))
+                                 int(amount_int[:, c].sum()))
     model.minimize(makespan)
     return _Model(model, start, member, choice, makespan)
 
 
 def _payload_units(inst: Instance) -> tuple[np.ndarray, np.ndarray]:
-    """Payloads as integers for Eq. 11 in the boolean model, never accepting a subteam
-    that does not cover: exact when every payload is a multiple of 1/SCALES[-1]; else
-    robots rounded down and needs (less the tolerance) rounded up at 1e6."""
-    values = np.concatenate([inst.robot_payload, inst.task_payload])
-    scale, exact = _time_scale(values)
+    """Payloads as integers for Eq. 11 in the boolean model (:func:`_units`)."""
+    return _units(inst.robot_payload, inst.task_payload)
+
+
+def _units(have: np.ndarray, need: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Amounts (robots) and needs (tasks) as integers for a sum in the boolean model,
+    never accepting a subteam that does not cover: exact when every value is a multiple
+    of 1/SCALES[-1]; else robots rounded down and needs (less the tolerance) rounded up at 1e6."""
+    scale, exact = _time_scale(np.concatenate([have, need]))
     if exact:
-        return np.round(inst.robot_payload * scale).astype(np.int64), np.round(inst.task_payload * scale).astype(np.int64)
+        return np.round(have * scale).astype(np.int64), np.round(need * scale).astype(np.int64)
     fine = 10**6
-    return (np.floor(inst.robot_payload * fine).astype(np.int64),
-            np.ceil((inst.task_payload - TOLERANCE) * fine).astype(np.int64))
+    return np.floor(have * fine).astype(np.int64), np.ceil((need - TOLERANCE) * fine).astype(np.int64)
 
 
 def covering_members(model: cp_model.CpModel, inst: Instance, j: int, pay_int: np.ndarray,
                      need_int: np.ndarray) -> dict[int, cp_model.IntVar]:
     """Task ``j``'s subteam in the boolean formulation: a boolean per robot that could
-    help, constrained to cover (Eqs. 10-11; payloads in :func:`_payload_units`' integers)."""
-    need = inst.task_caps[j]
-    useful = np.flatnonzero((inst.robot_caps & need).any(axis=1) | (inst.tasks[j].payload > TOLERANCE))
+    help, constrained to cover (Eqs. 10-11; payloads in :func:`_payload_units`' integers;
+    each trait's amounts add up, in :func:`_units`' integers). With roles a boolean per
+    member and required trait it counts toward, at most one per member."""
+    need = inst.task_needs[j]
+    amounts = inst.robot_amounts
+    cols = np.flatnonzero(need > TOLERANCE)
+    useful = np.flatnonzero((amounts[:, cols] > 0).any(axis=1) | (inst.tasks[j].payload > TOLERANCE))
     member = {int(r): model.new_bool_var(f"y_{r}_{j}") for r in useful}
-    for c in np.flatnonzero(need):  # Eq. 10
-        model.add_bool_or([member[r] for r in member if inst.robot_caps[r, c]])
+    give: dict[tuple[int, int], cp_model.IntVar] = {(r, int(c)): y for r, y in member.items() for c in cols}
+    if inst.task_roles[j]:  # each member counts toward one required trait
+        give = {(r, int(c)): model.new_bool_var(f"g_{r}_{j}_{c}") for r in member for c in cols if amounts[r, c] > 0}
+        for r, y in member.items():
+            model.add(sum(g for (q, _), g in give.items() if q == r) <= y)
+    k = len(inst.capabilities)
+    for c in cols:
+        holders = [r for r in member if amounts[r, c] > 0]
+        if c < k and not inst.task_roles[j]:  # Eq. 10: a holder of the capability
+            model.add_bool_or([member[r] for r in holders])
+            continue
+        have, want = _units(amounts[:, c], need[c:c + 1])
+        model.add(sum(int(have[r]) * give[r, int(c)] for r in holders) >= int(want[0]))
     if need_int[j] > 0:  # Eq. 11
         model.add(sum(int(pay_int[r]) * y for r, y in member.items()) >= int(need_int[j]))
     return member
@@ -457,13 +491,14 @@ def _solution(inst: Instance, state: State, h: _Horizon, m: _Model, solver: cp_m
             out.append(Assignment(t.id, tuple(inst.robots[r].id for r in state.task_team[j]), s0, s0 + t.duration))
             continue
         team = [r for r, y in m.member[j].items() if solver.boolean_value(y)]
-        if not covers(inst.robot_caps[team], inst.robot_payload[team], inst.task_caps[j], t.payload):
+        roles = bool(inst.task_roles[j])
+        if not covers(inst.robot_amounts[team], inst.robot_payload[team], inst.task_needs[j], t.payload, roles):
             raise ExpertError(f"task {t.id!r}: the solver's subteam does not cover it (payload rounding)")
         if h.teams is None:  # boolean model: drop members the subteam does not need
-            team = prune(team, inst.robot_caps, inst.robot_payload, inst.task_caps[j], t.payload)
+            team = prune(team, inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload, roles=roles)
         s0 = solver.value(m.start[j]) / h.scale
         out.append(Assignment(t.id, tuple(inst.robots[r].id for r in sorted(team)), s0, s0 + t.duration))
-    return left_shift(inst, Schedule.from_assignments(inst.name, "exact", out), state)
+    return left_shift(inst, Schedule.from_assignments(inst, "exact", out), state)
 
 
 def solve_exact(
@@ -494,7 +529,7 @@ def solve_exact(
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
     h = _horizon(inst, state, todo, hint, coalitions=formulation != "boolean")
     m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
-    _add_travel(m.model, inst, state, h, m.start, m.member)
+    _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
     _add_hint(inst, h, m, hint)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
@@ -602,15 +637,16 @@ class ExactPolicy:
 
 def exact_match(
     r: FloatArray,
-    robot_caps: BoolArray,
+    robot_caps: AmountArray,
     robot_payload: FloatArray,
-    task_caps: BoolArray,
+    task_caps: AmountArray,
     task_payload: FloatArray,
     *,
     time_limit: float = 10.0,
     workers: int = 2,
     necessary_only: bool = True,
     allowed: BoolArray | None = None,
+    roles: BoolArray | None = None,
 ) -> Match:
     """Optimal A* of Eqs. 7-11 with CP-SAT (rewards scaled to integers, 1e-6 resolution).
 
@@ -619,7 +655,11 @@ def exact_match(
     or payload. Without it, any robot may join a covered task when that pays more.
     ``allowed`` (n, m), as for the greedy matching, limits each task to the robots allowed
     for it (with travel: those that can reach it at all); None allows every pair.
+    The capability arrays may hold trait amounts (summed, :mod:`~lvws_ros.core.subteams`);
+    tasks with ``roles`` are not modelled here: they are left to the greedy matching.
     """
+    if roles is not None and roles.any():
+        return greedy_match(r, robot_caps, robot_payload, task_caps, task_payload, allowed, roles)
     n, m = check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
     if allowed is not None and allowed.shape != (n, m):
         raise ValueError(f"allowed has shape {allowed.shape}, expected ({n}, {m})")
@@ -631,22 +671,27 @@ def exact_match(
     z = [model.new_bool_var(f"z_{j}") for j in range(m)]
     pay = np.round(robot_payload * 1000).astype(np.int64)
     need = np.ceil(task_payload * 1000 - TOLERANCE).astype(np.int64)
+    binary = np.all((robot_caps == 0) | (robot_caps == 1), axis=0)  # (K,): capabilities
+    amt = np.round(np.asarray(robot_caps, dtype=np.float64) * 1000).astype(np.int64)
+    want = np.ceil(np.asarray(task_caps, dtype=np.float64) * 1000 - TOLERANCE).astype(np.int64)
     for i in range(n):
         model.add_exactly_one(a[i])  # Eq. 9, with the idle column as "no task"
     for j in range(m):
         for i in range(n):
             model.add_implication(a[i][j], z[j])
-        for k in np.flatnonzero(task_caps[j]):  # Eq. 10
-            holders = [a[i][j] for i in range(n) if robot_caps[i, k]]
-            if holders:
+        for k in np.flatnonzero(task_caps[j] > TOLERANCE):  # Eq. 10 (and additive traits)
+            holders = [a[i][j] for i in range(n) if robot_caps[i, k] > 0]
+            if not holders:
+                model.add(z[j] == 0)
+            elif binary[k] and task_caps[j, k] <= 1:
                 model.add_bool_or(holders).only_enforce_if(z[j])
             else:
-                model.add(z[j] == 0)
+                model.add(sum(int(amt[i, k]) * a[i][j] for i in range(n)) >= int(want[j, k])).only_enforce_if(z[j])
         carried = sum(int(pay[i]) * a[i][j] for i in range(n))
         model.add(carried >= int(need[j])).only_enforce_if(z[j])  # Eq. 11
         if necessary_only:
-            _only_needed_members(model, [a[i][j] for i in range(n)], carried, pay, int(need[j]), robot_caps,
-                                 task_caps[j], f"{j}")
+            _only_needed_members(model, [a[i][j] for i in range(n)], carried, pay, int(need[j]), amt,
+                                 want[j], f"{j}")
     scaled = np.round(r * 1e6).astype(np.int64)
     model.maximize(sum(int(scaled[i, j]) * a[i][j] for i in range(n) for j in range(m + 1)))
     solver = cp_model.CpSolver()
@@ -670,18 +715,19 @@ def exact_match(
 
 
 def _only_needed_members(model: cp_model.CpModel, member: list[cp_model.IntVar], carried: Any,
-                         pay: npt.NDArray[np.int64], need: int, robot_caps: BoolArray, need_caps: BoolArray,
-                         tag: str) -> None:
+                         pay: npt.NDArray[np.int64], need: int, amounts: npt.NDArray[np.int64],
+                         need_caps: npt.NDArray[np.int64], tag: str) -> None:
     """Each member of the task's subteam is needed: without it the payload falls short,
-    or it is the only member holding some capability the task needs."""
+    or some trait (capability) the task needs: for 0/1 capabilities, it is the only member
+    holding it. ``amounts`` (n, K) and ``need_caps`` (K,) in the same integer units."""
     for i, x in enumerate(member):
         short = model.new_bool_var(f"short_{i}_{tag}")  # payload would fall short without i
         model.add(carried - int(pay[i]) < need).only_enforce_if(short)
         reasons = [short]
-        for k in np.flatnonzero(need_caps & robot_caps[i]):
-            sole = model.new_bool_var(f"sole_{i}_{tag}_{k}")  # i is the only holder of k
-            others = [member[q] for q in range(len(member)) if q != i and robot_caps[q, k]]
+        for k in np.flatnonzero((need_caps > 0) & (amounts[i] > 0)):
+            sole = model.new_bool_var(f"sole_{i}_{tag}_{k}")  # trait k falls short without i
+            others = [(int(amounts[q, k]), member[q]) for q in range(len(member)) if q != i and amounts[q, k] > 0]
             if others:
-                model.add(sum(others) == 0).only_enforce_if(sole)
+                model.add(sum(v * y for v, y in others) < int(need_caps[k])).only_enforce_if(sole)
             reasons.append(sole)
         model.add_bool_or(reasons).only_enforce_if(x)

@@ -139,15 +139,17 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
         t = inst.tasks[j]
         if j in member:
             team = [r for r, y in member[j].items() if solver.boolean_value(y)]
-            if not covers(inst.robot_caps[team], inst.robot_payload[team], inst.task_caps[j], t.payload):
+            if not covers(inst.robot_amounts[team], inst.robot_payload[team], inst.task_needs[j], t.payload,
+                          bool(inst.task_roles[j])):
                 raise ExpertError(f"task {t.id!r}: the solver's subteam does not cover it (payload rounding)")
-            team = prune(team, inst.robot_caps, inst.robot_payload, inst.task_caps[j], t.payload)
+            team = prune(team, inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload,
+                         roles=bool(inst.task_roles[j]))
             robots = tuple(inst.robots[r].id for r in sorted(team))
         else:
             robots = by_task[t.id].robots
         s0 = solver.value(start[j]) / scale
         out.append(Assignment(t.id, robots, s0, s0 + t.duration))
-    return left_shift(inst, Schedule.from_assignments(inst.name, inc.policy, out), state)
+    return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state)
 
 
 def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,

@@ -592,4 +592,4 @@ class CellSim:
 
     def schedule(self, policy: str, decisions: int = 0, compute: float = 0.0) -> Schedule:
         out = [Assignment(t, self.team[t], self.start[t], self.end[t]) for t in self.end]
-        return Schedule.from_assignments(self.inst.name, policy, out, decisions, compute)
+        return Schedule.from_assignments(self.inst, policy, out, decisions, compute)
