@@ -10,7 +10,7 @@ from typing import Any
 
 from lvws_ros.core.datasets import DATASETS
 from lvws_ros.core.families import TRAINING_FAMILIES
-from lvws_ros.core.formats import dumps, load_instance
+from lvws_ros.core.formats import dumps, load_instance, save_instance
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import ConfigError, InstanceError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
@@ -96,6 +96,29 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if args.out:
         save_schedule(result.schedule, args.out)
     sys.stdout.write(dumps(schedule_to_dict(result.schedule)))
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from lvws_ros.core.importers import import_csv, import_mspsp
+
+    wanted = 1 if args.kind == "mspsp" else 2
+    if len(args.files) != wanted:
+        raise ConfigError(f"{args.kind} takes {wanted} file(s): "
+                          f"{'FILE.dzn' if wanted == 1 else 'ROBOTS.csv TASKS.csv'}, got {len(args.files)}")
+    if args.kind == "mspsp":
+        if args.sites or args.objective != "makespan":
+            raise ConfigError("--sites and --objective are for csv")
+        inst = import_mspsp(args.files[0])
+        if args.name:
+            inst = replace(inst, name=args.name)
+    else:
+        inst = import_csv(args.files[0], args.files[1], args.sites, name=args.name, objective=args.objective)
+    save_instance(inst, args.out)
+    print(f"{args.out}: {inst.num_robots} robots, {inst.num_tasks} tasks, traits {list(inst.traits)}"
+          + (", roles" if inst.task_roles.any() else "") + (", travel" if inst.travel is not None else ""))
     return 0
 
 
@@ -318,6 +341,16 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--matching", choices=("greedy", "exact"), default=None,
                    help="lvws: Eqs. 7-11 on R by the paper's greedy (default) or exactly by CP-SAT")
     p.add_argument("--out", help="also write the schedule to this file")
+
+    p = add("import", cmd_import, "turn a multi-skill project scheduling file (MiniZinc data, .dzn) or CSV files "
+                                   "of robots and tasks into an lvws-instance/1 file")
+    p.add_argument("kind", choices=("mspsp", "csv"))
+    p.add_argument("files", nargs="+", help="mspsp: FILE.dzn; csv: ROBOTS.csv TASKS.csv")
+    p.add_argument("--sites", default=None, help="csv: SITES.csv (name,x,y): the travel extension")
+    p.add_argument("--objective", choices=("makespan", "return"), default="makespan",
+                   help="csv: the instance's objective")
+    p.add_argument("--name", default=None, help="the instance's name (default: the file's)")
+    p.add_argument("--out", required=True, help="the lvws-instance/1 file to write")
 
     p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")
     p.add_argument("instance")

@@ -1,0 +1,300 @@
+"""Importers for the files users already have, into ``lvws-instance/1`` (formats.md,
+"Importing"): the multi-skill project scheduling (MSPSP) instances of the MiniZinc data
+format, and a plain CSV of robots and one of tasks.
+
+Every error is an :class:`~lvws_ros.errors.InstanceError` naming the file and the line.
+Nothing in a file is evaluated: the DataZinc reader accepts only the assignments the MSPSP
+files hold (integers, booleans, arrays, 2-D arrays ``[| ... |]``, sets), the CSV reader is
+the standard library's.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+from lvws_ros.core.problem import Instance, Robot, Task
+from lvws_ros.core.travel import build_travel
+from lvws_ros.errors import InstanceError
+
+__all__ = ["import_csv", "import_mspsp", "parse_dzn"]
+
+# ---------------------------------------------------------------- DataZinc (MSPSP)
+
+_TOKEN = re.compile(r"\s*(?:(?P<num>-?\d+)|(?P<word>true|false)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|"
+                    r"(?P<sym>\[\||\|\]|[\[\]{},|=;]))")
+
+
+def _line(text: str, pos: int) -> int:
+    return text.count("\n", 0, pos) + 1
+
+
+def parse_dzn(text: str, where: str) -> dict[str, Any]:
+    """The assignments ``name = value;`` of a DataZinc text: integers, booleans, 1-D
+    arrays ``[a, b]``, 2-D arrays ``[| a, b | c, d |]`` (rows as lists), sets ``{a, b}``
+    (as lists). Comments (``%`` to the end of the line) are skipped. InstanceError names
+    ``where`` and the line of anything else."""
+    text = re.sub(r"%[^\n]*", lambda m: " " * len(m.group()), text)  # keep positions for line numbers
+    tokens: list[tuple[str, Any, int]] = []
+    pos = 0
+    while pos < len(text):
+        if text[pos:].strip() == "":
+            break
+        m = _TOKEN.match(text, pos)
+        if m is None:
+            start = pos + len(text[pos:]) - len(text[pos:].lstrip())
+            raise InstanceError(f"{where} line {_line(text, start)}: unexpected {text[start:start + 20]!r}")
+        kind = m.lastgroup or ""
+        value: Any = m.group(kind)
+        if kind == "num":
+            value = int(value)
+        elif kind == "word":
+            value = value == "true"
+        tokens.append((kind, value, m.start(kind)))
+        pos = m.end()
+    out: dict[str, Any] = {}
+    k = 0
+
+    def take(expect: str | None = None) -> tuple[str, Any, int]:
+        nonlocal k
+        if k >= len(tokens):
+            raise InstanceError(f"{where}: unexpected end of file")
+        tok = tokens[k]
+        if expect is not None and tok[1] != expect:
+            raise InstanceError(f"{where} line {_line(text, tok[2])}: expected {expect!r}, got {tok[1]!r}")
+        k += 1
+        return tok
+
+    def value_at() -> Any:
+        kind, val, at = take()
+        if kind in ("num", "word"):
+            return val
+        if val in ("[", "{"):
+            close = "]" if val == "[" else "}"
+            items = []
+            while tokens[k][1] != close if k < len(tokens) else False:
+                items.append(value_at())
+                if k < len(tokens) and tokens[k][1] == ",":
+                    take(",")
+            take(close)
+            return items
+        if val == "[|":
+            rows: list[list[Any]] = [[]]
+            while k < len(tokens) and tokens[k][1] != "|]":
+                if tokens[k][1] == "|":
+                    take("|")
+                    rows.append([])
+                    continue
+                rows[-1].append(value_at())
+                if k < len(tokens) and tokens[k][1] == ",":
+                    take(",")
+            take("|]")
+            return [r for r in rows if r]
+        raise InstanceError(f"{where} line {_line(text, at)}: unexpected {val!r}")
+
+    while k < len(tokens):
+        kind, name, at = take()
+        if kind != "name":
+            raise InstanceError(f"{where} line {_line(text, at)}: expected a name, got {name!r}")
+        take("=")
+        out[name] = value_at()
+        take(";")
+    return out
+
+
+def _ints(data: dict[str, Any], key: str, where: str, length: int | None = None) -> list[int]:
+    value = data.get(key)
+    if not isinstance(value, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+        raise InstanceError(f"{where}: {key} must be an array of integers")
+    if length is not None and len(value) != length:
+        raise InstanceError(f"{where}: {key} has {len(value)} entries, expected {length}")
+    return value
+
+
+def _table(data: dict[str, Any], key: str, where: str, rows: int, cols: int, kind: type) -> list[list[Any]]:
+    value = data.get(key)
+    if not isinstance(value, list) or len(value) != rows or \
+            not all(isinstance(r, list) and len(r) == cols and all(type(v) is kind for v in r) for r in value):
+        raise InstanceError(f"{where}: {key} must be a {rows} x {cols} table of {kind.__name__}s")
+    return value
+
+
+def import_mspsp(path: str | Path) -> Instance:
+    """An MSPSP instance (the MiniZinc data files of the multi-skill project scheduling
+    benchmarks: ``nActs``, ``dur``, ``nSkills``, ``sreq``, ``nResources``, ``mastery``,
+    ``pred``/``succ``) as traits with roles, exactly: each resource is a robot with amount 1
+    of each skill it masters, each activity a task requiring ``sreq`` units of each skill,
+    and with roles each member fills one skill slot. The source and sink activities (no
+    duration, no requirement) are dropped, their precedences kept through them."""
+    p = Path(path)
+    where = str(p)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InstanceError(f"{where}: cannot read the MSPSP file: {exc}") from None
+    data = parse_dzn(text, where)
+    for key in ("nActs", "nSkills", "nResources"):
+        if not isinstance(data.get(key), int) or isinstance(data.get(key), bool) or data[key] < 0:
+            raise InstanceError(f"{where}: {key} must be a non-negative integer")
+    n_acts, n_skills, n_res = data["nActs"], data["nSkills"], data["nResources"]
+    dur = _ints(data, "dur", where, n_acts)
+    sreq = _table(data, "sreq", where, n_acts, n_skills, int)
+    mastery = _table(data, "mastery", where, n_res, n_skills, bool)
+    pred, succ = _ints(data, "pred", where), _ints(data, "succ", where, len(_ints(data, "pred", where)))
+    skills = [f"skill{s + 1}" for s in range(n_skills)]
+    keep = [a for a in range(n_acts) if dur[a] > 0 or any(sreq[a])]
+    for a in keep:
+        if dur[a] <= 0:
+            raise InstanceError(f"{where}: activity {a + 1} needs workers but lasts {dur[a]}: a task lasts > 0")
+        if not any(sreq[a]):
+            raise InstanceError(f"{where}: activity {a + 1} lasts {dur[a]} but needs no worker: lvws schedules "
+                                "tasks done by subteams")
+    before: dict[int, set[int]] = {a: set() for a in range(n_acts)}
+    for n, (a, b) in enumerate(zip(pred, succ, strict=True)):
+        if not (1 <= a <= n_acts and 1 <= b <= n_acts):
+            raise InstanceError(f"{where}: precedence {n + 1} ({a} -> {b}) names an activity outside 1..{n_acts}")
+        before[b - 1].add(a - 1)
+    kept = set(keep)
+
+    def kept_before(a: int, seen: set[int]) -> set[int]:  # through dropped activities
+        out: set[int] = set()
+        for q in before[a]:
+            if q in kept:
+                out.add(q)
+            elif q not in seen:
+                seen.add(q)
+                out |= kept_before(q, seen)
+        return out
+
+    robots = tuple(Robot(f"res{r + 1}", (), 0.0, traits=tuple((skills[s], 1.0) for s in range(n_skills)
+                                                               if mastery[r][s]))
+                   for r in range(n_res))
+    tasks = tuple(Task(f"act{a + 1}", (), 0.0, float(dur[a]),
+                       tuple(f"act{q + 1}" for q in sorted(kept_before(a, set()))),
+                       requires=tuple((skills[s], float(sreq[a][s])) for s in range(n_skills) if sreq[a][s]))
+                  for a in keep)
+    try:
+        return Instance(p.stem, (), robots, tasks, traits=tuple(skills), roles=True)
+    except InstanceError as exc:
+        raise InstanceError(f"{where}: {exc}") from None
+
+
+# ---------------------------------------------------------------- CSV
+
+_ROBOT_COLUMNS = {"id", "site", "speed", "home"}
+_TASK_COLUMNS = {"id", "duration", "after", "site", "from", "to", "roles"}
+
+
+def _rows(path: Path) -> tuple[list[str], list[tuple[int, dict[str, str]]]]:
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            reader = csv.DictReader(f)
+            rows = [(reader.line_num, row) for row in reader]
+            header = list(reader.fieldnames or [])
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InstanceError(f"{path}: cannot read the CSV file: {exc}") from None
+    if "id" not in header:
+        raise InstanceError(f"{path} line 1: the header needs an 'id' column, got {header}")
+    if len(set(header)) != len(header):
+        raise InstanceError(f"{path} line 1: duplicate column names in {header}")
+    for line, row in rows:
+        if None in row or any(v is None for v in row.values()):
+            raise InstanceError(f"{path} line {line}: {len(header)} columns expected")
+    return header, rows
+
+
+def _amount(text: str, where: str, positive: bool = False) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise InstanceError(f"{where}: expected a number, got {text!r}") from None
+    if not math.isfinite(value) or value < 0 or (positive and value == 0):
+        raise InstanceError(f"{where}: expected a finite number {'> 0' if positive else '>= 0'}, got {text!r}")
+    return value
+
+
+def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | Path | None = None,
+               name: str | None = None, objective: str = "makespan") -> Instance:
+    """An instance in traits from two CSV files (formats.md, "Importing"): robots (``id``,
+    optional ``site``, ``speed``, ``home``; every other column a trait amount) and tasks
+    (``id``, ``duration``, optional ``after`` (ids separated by spaces or ``;``), ``site``
+    or ``from``/``to``, ``roles`` (true/false); every other column a trait requirement).
+    With sites (``sites_csv``: ``name,x,y``) the travel extension applies. Empty cells are
+    0 or absent. InstanceError names the file and the line."""
+    rp, tp = Path(robots_csv), Path(tasks_csv)
+    r_head, r_rows = _rows(rp)
+    t_head, t_rows = _rows(tp)
+    traits = [c for c in r_head if c not in _ROBOT_COLUMNS]
+    unknown = [c for c in t_head if c not in _TASK_COLUMNS and c not in traits]
+    if unknown:
+        raise InstanceError(f"{tp} line 1: column(s) {unknown} are neither task fields nor robot traits "
+                            f"(traits: {traits})")
+    if "duration" not in t_head:
+        raise InstanceError(f"{tp} line 1: the header needs a 'duration' column")
+    sites: dict[str, list[float]] = {}
+    if sites_csv is not None:
+        sp = Path(sites_csv)
+        try:
+            with sp.open(newline="", encoding="utf-8") as f:
+                reader = csv.reader(f)
+                for row in reader:
+                    where = f"{sp} line {reader.line_num}"
+                    if reader.line_num == 1 and row and row[0].strip().lower() == "name":
+                        continue
+                    if len(row) != 3:
+                        raise InstanceError(f"{where}: expected name,x,y")
+                    sites[row[0].strip()] = [_coord(row[1], f"{where}: x"), _coord(row[2], f"{where}: y")]
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise InstanceError(f"{sp}: cannot read the CSV file: {exc}") from None
+    robots, robot_sites, homes = [], [], []
+    for line, row in r_rows:
+        where = f"{rp} line {line}"
+        rid = row["id"].strip()
+        amounts = tuple((c, _amount(row[c], f"{where}: {c}")) for c in traits if row[c].strip())
+        robots.append(Robot(rid, (), 0.0, traits=tuple((c, a) for c, a in amounts if a > 0)))
+        if sites:
+            site = row.get("site", "").strip()
+            if not site:
+                raise InstanceError(f"{where}: site: every robot needs a site when there are sites")
+            speed = row.get("speed", "").strip()
+            robot_sites.append((rid, site, _amount(speed, f"{where}: speed", positive=True) if speed else None))
+            homes.append(row.get("home", "").strip() or None)
+        elif any(row.get(c, "").strip() for c in ("site", "speed", "home")):
+            raise InstanceError(f"{where}: site, speed and home need the sites file (--sites)")
+    tasks, task_sites = [], []
+    for line, row in t_rows:
+        where = f"{tp} line {line}"
+        tid = row["id"].strip()
+        needs = tuple((c, _amount(row[c], f"{where}: {c}")) for c in traits if c in row and row[c].strip())
+        roles_text = row.get("roles", "").strip().lower()
+        if roles_text not in ("", "true", "false", "1", "0", "yes", "no"):
+            raise InstanceError(f"{where}: roles: expected true or false, got {row['roles']!r}")
+        after = tuple(a for a in re.split(r"[\s;]+", row.get("after", "") or "") if a)
+        tasks.append(Task(tid, (), 0.0, _amount(row["duration"], f"{where}: duration", positive=True), after,
+                          requires=tuple((c, a) for c, a in needs if a > 0),
+                          roles=None if not roles_text else roles_text in ("true", "1", "yes")))
+        if sites:
+            a = row.get("site", "").strip() or row.get("from", "").strip()
+            b = row.get("site", "").strip() or row.get("to", "").strip()
+            if not a or not b:
+                raise InstanceError(f"{where}: site (or from and to): every task needs one when there are sites")
+            task_sites.append((tid, a, b))
+    try:
+        travel = build_travel(sites, {}, robot_sites, task_sites, homes) if sites else None
+        return Instance(name or tp.stem, (), tuple(robots), tuple(tasks), travel=travel, traits=tuple(traits),
+                        objective=objective)
+    except InstanceError as exc:
+        raise InstanceError(f"{tp}: {exc}") from None
+
+
+def _coord(text: str, where: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise InstanceError(f"{where}: expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise InstanceError(f"{where}: expected a finite number, got {text!r}")
+    return value

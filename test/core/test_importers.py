@@ -1,0 +1,144 @@
+"""`lvws import`: multi-skill project scheduling files (MiniZinc data) and CSV files of
+robots and tasks become lvws-instance/1 files; errors name the file and the line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from lvws_ros.core.executor import simulate
+from lvws_ros.core.formats import load_instance
+from lvws_ros.core.importers import import_csv, import_mspsp, parse_dzn
+from lvws_ros.core.schedule import check_schedule
+from lvws_ros.errors import InstanceError
+from lvws_ros.policies.exact import solve_exact
+from lvws_ros.registry import make_policy
+
+# Written for this test in the layout of the MSPSP benchmark files: a source (1) and a sink
+# (6) without duration, three workers, two skills. Worker 1 holds both skills but fills one
+# slot: activity 3 needs one of each, so it needs two workers. Optimal: 5 (every way to give
+# activity 3 two workers for 2 s delays activity 4 or activity 2); were worker 1 allowed to
+# fill both slots, 4 (activities 2 and 4 beside activity 3, then activity 5).
+MSPSP = """% a small project
+mint = 5;
+nActs = 6;
+dur = [0,3,2,3,1,0];
+nSkills = 2;
+sreq = [| 0,0,
+        | 1,0,
+        | 1,1,
+        | 0,1,
+        | 1,0,
+        | 0,0, |];
+nResources = 3;
+mastery = [| true,true,
+           | true,false,
+           | false,true, |];
+nPrecs = 7;
+pred = [1,1,1,2,3,4,5];
+succ = [2,3,4,5,6,6,6];
+USEFUL_RES = [{}, {1,2}, {1,2,3}, {1,3}, {1,2}, {}];
+"""
+
+
+def test_an_mspsp_file_is_expressed_exactly_with_roles(tmp_path):
+    path = tmp_path / "tiny.dzn"
+    path.write_text(MSPSP)
+    inst = import_mspsp(path)
+    assert inst.traits == ("skill1", "skill2") and inst.task_roles.all()
+    assert [t.id for t in inst.tasks] == ["act2", "act3", "act4", "act5"]  # source and sink dropped
+    assert inst.tasks[inst.task_index["act5"]].after == ("act2",)
+    assert dict(inst.robots[0].traits) == {"skill1": 1.0, "skill2": 1.0}
+    res = solve_exact(inst, workers=2, time_limit=20)
+    assert res.proven and res.makespan == pytest.approx(5.0)
+    assert check_schedule(inst, res.schedule) == []
+    for name in ("grp", "lvws", "rand_subteam"):
+        assert check_schedule(inst, simulate(inst, make_policy(name)).schedule) == []
+
+
+def test_without_roles_the_same_file_would_be_shorter(tmp_path):
+    """The role rule matters: worker 1 alone would cover act3 if it counted for both skills."""
+    path = tmp_path / "tiny.dzn"
+    path.write_text(MSPSP)
+    inst = import_mspsp(path)
+    from dataclasses import replace
+
+    free = replace(inst, roles=False)
+    assert solve_exact(free, workers=2, time_limit=20).makespan == pytest.approx(4.0)
+
+
+@pytest.mark.parametrize("text,message", [
+    ("nActs = 2;\ndur = [1,2];\nx = 3 @;", "line 3: unexpected '@;'"),
+    ("nActs = 2;\ndur = [1;", "expected ';'"),
+    (MSPSP.replace("dur = [0,3,2,3,1,0];", "dur = [0,3,2,4,1];"), "dur has 5 entries, expected 6"),
+    (MSPSP.replace("| 0,1,\n", "| 0,1,1,\n"), "sreq must be a 6 x 2 table"),
+    (MSPSP.replace("dur = [0,3,2,3,1,0];", "dur = [0,3,2,0,1,0];"), "activity 4 needs workers but lasts 0"),
+    (MSPSP.replace("succ = [2,3,4,5,6,6,6];", "succ = [2,3,4,5,6,6,9];"), "names an activity outside 1..6"),
+    (MSPSP.replace("| 0,1,\n", "| 0,3,\n"), "can never be covered"),
+])
+def test_bad_mspsp_files_name_the_line_or_the_item(tmp_path, text, message):
+    path = tmp_path / "bad.dzn"
+    path.write_text(text)
+    with pytest.raises(InstanceError, match=message.replace("(", r"\(").replace(")", r"\)")) as info:
+        import_mspsp(path)
+    assert str(path) in str(info.value)
+
+
+def test_the_datazinc_reader_takes_values_not_code():
+    data = parse_dzn("a = 1; % note\nb = [| true, false | false, true |];\nc = {1, 2};\nd = [];", "x.dzn")
+    assert data == {"a": 1, "b": [[True, False], [False, True]], "c": [1, 2], "d": []}
+    with pytest.raises(InstanceError, match="x.dzn line 1"):
+        parse_dzn('a = "import os";', "x.dzn")
+
+
+ROBOTS = "id,site,speed,home,welder,gripper,payload\nw1,dock,1.0,,1,,1\nw2,dock,1.0,,1,1,\narm,c,,,,2,2\n"
+TASKS = ("id,duration,after,site,roles,welder,gripper,payload\nweld,6,,c,,2,1,\naudit,2,weld,c,true,1,1,\n"
+         "lift,3,,c,,,,3\n")
+SITES = "name,x,y\ndock,0,0\nb,4,3\nc,0,3\n"
+
+
+def test_csv_files_become_a_trait_instance_with_travel(tmp_path):
+    for name, text in (("robots.csv", ROBOTS), ("tasks.csv", TASKS), ("sites.csv", SITES)):
+        (tmp_path / name).write_text(text)
+    inst = import_csv(tmp_path / "robots.csv", tmp_path / "tasks.csv", tmp_path / "sites.csv", objective="return")
+    assert inst.traits == ("welder", "gripper", "payload") and inst.objective == "return"
+    assert dict(inst.robots[1].traits) == {"welder": 1.0, "gripper": 1.0}
+    assert list(inst.task_roles) == [False, True, False] and inst.travel is not None
+    assert inst.tasks[1].after == ("weld",)
+    s = simulate(inst, make_policy("grp")).schedule
+    assert check_schedule(inst, s) == []
+
+
+@pytest.mark.parametrize("edit,message", [
+    (lambda r, t: (r, t.replace("weld,6,", "weld,six,")), "tasks.csv line 2: duration: expected a number, got 'six'"),
+    (lambda r, t: (r, t.replace("lift,3,,c,,,,3", "lift,3,,c,,,,-3")), "tasks.csv line 4: payload: expected a finite"),
+    (lambda r, t: (r.replace("w2,dock,1.0,,1,1,", "w2,dock,1.0,,1,1"), t), "robots.csv line 3: 7 columns expected"),
+    (lambda r, t: (r, t.replace("roles,welder,gripper,payload", "roles,welder,gripper,laser")),
+     "column(s) ['laser'] are neither task fields nor robot traits"),
+    (lambda r, t: (r, t.replace("audit,2,weld,c,true", "audit,2,weld,c,maybe")), "line 3: roles: expected true"),
+    (lambda r, t: (r, t.replace("audit,2,weld", "audit,2,wled")), "unknown task id(s) ['wled']"),
+    (lambda r, t: (r.replace("arm,c,", "arm,moon,"), t), "unknown site 'moon'"),
+])
+def test_bad_csv_files_name_the_line(tmp_path, edit, message):
+    robots, tasks = edit(ROBOTS, TASKS)
+    for name, text in (("robots.csv", robots), ("tasks.csv", tasks), ("sites.csv", SITES)):
+        (tmp_path / name).write_text(text)
+    with pytest.raises(InstanceError, match=message.replace("(", r"\(").replace(")", r"\)")
+                       .replace("[", r"\[").replace("]", r"\]")):
+        import_csv(tmp_path / "robots.csv", tmp_path / "tasks.csv", tmp_path / "sites.csv")
+
+
+def test_lvws_import_writes_the_file_and_exits_2_on_bad_input(tmp_path):
+    (tmp_path / "tiny.dzn").write_text(MSPSP)
+    out = tmp_path / "tiny.json"
+    done = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "import", "mspsp", str(tmp_path / "tiny.dzn"),
+                           "--out", str(out)], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert load_instance(out).num_tasks == 4 and "roles" in done.stdout
+    (tmp_path / "bad.dzn").write_text(MSPSP.replace("nResources = 3;", "nResources = 4;"))
+    bad = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "import", "mspsp", str(tmp_path / "bad.dzn"),
+                          "--out", str(tmp_path / "x.json")], capture_output=True, text=True, check=False)
+    assert bad.returncode == 2 and "mastery must be a 4 x 2 table" in bad.stderr and "Traceback" not in bad.stderr
+    assert not (tmp_path / "x.json").exists()
