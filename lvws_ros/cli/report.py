@@ -78,15 +78,22 @@ def executed(teams: Sequence[TeamSnapshot], graph: GraphSnapshot, name: str = "r
     """The executed instance and schedule of the tasks the final graph holds: every robot
     any of ``teams`` had (a robot that failed for good still did its earlier work)."""
     latest = {r.id: r for team in teams for r in team.robots}
-    robots = tuple(Robot(r.id, tuple(r.capabilities), r.payload) for r in latest.values())
+    traits = tuple(graph.trait_names)
+
+    def pairs(amounts: Sequence[float]) -> tuple[tuple[str, float], ...]:
+        return tuple((c, float(a)) for c, a in zip(traits, amounts, strict=False) if a > 0)
+
+    robots = tuple(Robot(r.id, tuple(r.capabilities), r.payload, traits=pairs(r.traits)) for r in latest.values())
     tasks, out = [], []
     for t in graph.tasks:
         duration = t.duration
         if t.status == TaskStatus.DONE and t.start is not None and t.end is not None:
             duration = t.end - t.start
             out.append(Assignment(t.id, tuple(t.assigned_robots), t.start, t.end))
-        tasks.append(Task(t.id, tuple(t.capabilities), t.payload, max(duration, 1e-9), tuple(t.prerequisites)))
-    inst = Instance(name, tuple(graph.capability_names), robots, tuple(tasks))
+        tasks.append(Task(t.id, tuple(t.capabilities), t.payload, max(duration, 1e-9), tuple(t.prerequisites),
+                          requires=pairs(t.requires), roles=None if t.roles == 0 else t.roles == 2))
+    inst = Instance(name, tuple(graph.capability_names), robots, tuple(tasks), traits=traits,
+                    roles=bool(graph.roles))
     return inst, Schedule.from_assignments(name, "", out)
 
 

@@ -240,13 +240,13 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
         try:
             with sp.open(newline="", encoding="utf-8") as f:
                 reader = csv.reader(f)
-                for row in reader:
+                for cells in reader:
                     where = f"{sp} line {reader.line_num}"
-                    if reader.line_num == 1 and row and row[0].strip().lower() == "name":
+                    if reader.line_num == 1 and cells and cells[0].strip().lower() == "name":
                         continue
-                    if len(row) != 3:
+                    if len(cells) != 3:
                         raise InstanceError(f"{where}: expected name,x,y")
-                    sites[row[0].strip()] = [_coord(row[1], f"{where}: x"), _coord(row[2], f"{where}: y")]
+                    sites[cells[0].strip()] = [_coord(cells[1], f"{where}: x"), _coord(cells[2], f"{where}: y")]
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
             raise InstanceError(f"{sp}: cannot read the CSV file: {exc}") from None
     robots, robot_sites, homes = [], [], []

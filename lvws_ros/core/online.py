@@ -46,8 +46,8 @@ from typing import Any
 import numpy as np
 
 from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, check_decision
-from lvws_ros.core.problem import MAX_VALUE, Instance, Robot, Task
-from lvws_ros.core.subteams import covered
+from lvws_ros.core.problem import MAX_VALUE, OBJECTIVES, Instance, Robot, Task
+from lvws_ros.core.subteams import covered, covers
 from lvws_ros.core.travel import Travel, build_travel
 from lvws_ros.errors import InstanceError
 
@@ -67,6 +67,8 @@ class RobotInfo:
     pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
     site: str = ""  # travel: the site it is at when free ("": off every site, at its pose)
     speed: float = 0.0  # travel: > 0 mobile, 0 fixed at its site
+    traits: tuple[float, ...] = ()  # amount of each of the snapshot's trait_names (formats.md, "Traits")
+    home: str = ""  # return to base: the site it goes back to ("": its site)
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,8 @@ class TaskInfo:
     end: float | None = None
     site_from: str = ""  # travel: where its subteam meets
     site_to: str = ""  # travel: where its subteam is when it is done ("": site_from)
+    requires: tuple[float, ...] = ()  # amount of each of the graph's trait_names its subteam adds up
+    roles: int = 0  # 0: the graph's default, 1: no roles, 2: each member counts toward one trait
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,7 @@ class TeamSnapshot:
     stamp: float
     capability_names: tuple[str, ...]
     robots: tuple[RobotInfo, ...]
+    trait_names: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -100,6 +105,9 @@ class GraphSnapshot:
     # row-major over them (empty: straight lines between the coordinates)
     sites: tuple[tuple[str, float, float], ...] = ()
     distances: tuple[float, ...] = ()
+    trait_names: tuple[str, ...] = ()  # traits, roles and the objective (formats.md, "Traits")
+    roles: bool = False
+    objective: str = ""  # "" or "makespan"; "return"
 
 
 @dataclass(frozen=True)
@@ -126,12 +134,20 @@ def _bits(values: Sequence[int], k: int, where: str) -> None:
         raise InstanceError(f"{where}: expected {k} entries of 0 or 1 (one per capability), got {list(values)[:20]}")
 
 
+def _amounts(values: Sequence[float], names: Sequence[str], where: str) -> None:
+    """Trait amounts: none, or one finite amount >= 0 per trait name."""
+    if values and len(values) != len(names):
+        raise InstanceError(f"{where}: {len(values)} amounts for {len(names)} trait_names (one each, or none)")
+    for n, v in enumerate(values):
+        _finite(v, f"{where}[{n}]")
+
+
 def check_team(snap: TeamSnapshot) -> None:
     """InstanceError naming the TeamState field when the snapshot cannot be used."""
     _finite(snap.stamp, "TeamState header.stamp", high=math.inf)
     k = len(snap.capability_names)
-    if k < 1 or not snap.robots:
-        raise InstanceError("TeamState: needs capability_names and at least one robot")
+    if (k < 1 and not snap.trait_names) or not snap.robots:
+        raise InstanceError("TeamState: needs capability_names (or trait_names) and at least one robot")
     ids = [r.id for r in snap.robots]
     if len(set(ids)) != len(ids):
         raise InstanceError(f"TeamState robots: duplicate ids {sorted({i for i in ids if ids.count(i) > 1})}")
@@ -141,8 +157,9 @@ def check_team(snap: TeamSnapshot) -> None:
             raise InstanceError(f"TeamState robots[{n}].id: empty")
         _bits(r.capabilities, k, f"{where}.capabilities")
         _finite(r.payload, f"{where}.payload")
-        if r.payload <= 0:
+        if r.payload <= 0 and not snap.trait_names:
             raise InstanceError(f"{where}.payload: must be > 0, got {r.payload!r}")
+        _amounts(r.traits, snap.trait_names, f"{where}.traits")
         _finite(r.speed, f"{where}.speed")
         if 0 < r.speed < 1 / MAX_VALUE:
             raise InstanceError(f"{where}.speed: 0 (fixed) or at least {1 / MAX_VALUE:g}, got {r.speed!r}")
@@ -161,8 +178,12 @@ def check_graph(snap: GraphSnapshot) -> None:
             raise InstanceError(f"{where}.status: {t.status} is not one of "
                                 + ", ".join(f"{s.name}={s.value}" for s in TaskStatus))
         _bits(t.capabilities, k, f"{where}.capabilities")
-        if not any(t.capabilities):
-            raise InstanceError(f"{where}.capabilities: needs at least one capability")
+        _amounts(t.requires, snap.trait_names, f"{where}.requires")
+        if not any(t.capabilities) and not any(a > 0 for a in t.requires):
+            raise InstanceError(f"{where}.capabilities: needs at least one capability"
+                                + (" (or a trait in requires)" if snap.trait_names else ""))
+        if t.roles not in (0, 1, 2):
+            raise InstanceError(f"{where}.roles: 0 (the graph's), 1 (no) or 2 (yes), got {t.roles}")
         _finite(t.payload, f"{where}.payload")
         _finite(t.duration, f"{where}.duration")
         if t.duration <= 0:
@@ -173,6 +194,8 @@ def check_graph(snap: GraphSnapshot) -> None:
         for name, value in (("start_time", t.start), ("end_time", t.end)):
             if value is not None:
                 _finite(value, f"{where}.{name}", high=math.inf)
+    if snap.objective not in ("", *OBJECTIVES):
+        raise InstanceError(f"TaskGraph objective: '', 'makespan' or 'return', got {snap.objective[:40]!r}")
     _check_sites(snap)
     _check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
 
@@ -217,11 +240,24 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
     if tuple(team.capability_names) != tuple(graph.capability_names):
         raise InstanceError(f"team capabilities {list(team.capability_names)} differ from the task graph's "
                             f"{list(graph.capability_names)}")
-    robots = tuple(Robot(r.id, tuple(int(c) for c in r.capabilities), float(r.payload)) for r in team.robots)
+    if tuple(team.trait_names) != tuple(graph.trait_names):
+        raise InstanceError(f"team traits {list(team.trait_names)} differ from the task graph's "
+                            f"{list(graph.trait_names)}")
+    traits = tuple(graph.trait_names)
+    robots = tuple(Robot(r.id, tuple(int(c) for c in r.capabilities), float(r.payload),
+                         traits=tuple((c, float(a)) for c, a in zip(traits, r.traits, strict=False) if a > 0))
+                   for r in team.robots)
     tasks = tuple(Task(t.id, tuple(int(c) for c in t.capabilities), float(t.payload), float(t.duration),
-                       tuple(t.prerequisites)) for t in graph.tasks)
+                       tuple(t.prerequisites),
+                       requires=tuple((c, float(a)) for c, a in zip(traits, t.requires, strict=False) if a > 0),
+                       roles=None if t.roles == 0 else t.roles == 2)
+                  for t in graph.tasks)
     travel = snapshot_travel(team, graph) if graph.sites else None
-    return Instance(name, tuple(graph.capability_names), robots, tasks, travel=travel)
+    homes = [r.id for r in team.robots if r.home]
+    if homes and travel is None:
+        raise InstanceError(f"TeamState robots ({homes[0]!r}).home: a home needs the TaskGraph's sites")
+    return Instance(name, tuple(graph.capability_names), robots, tasks, travel=travel, traits=traits,
+                    objective=graph.objective or "makespan", roles=bool(graph.roles))
 
 
 def off_site(robot: RobotInfo) -> str:
@@ -268,7 +304,7 @@ def snapshot_travel(team: TeamSnapshot, graph: GraphSnapshot) -> Travel:
             distances[name] = {b: graph.distances[a * len(names) + k] for k, b in enumerate(names) if b != name}
     robots = [(r.id, name, r.speed if r.speed > 0 else None) for r, name in zip(team.robots, at, strict=True)]
     tasks = [(t.id, t.site_from, t.site_to or t.site_from) for t in graph.tasks]
-    return build_travel(sites, distances, robots, tasks)
+    return build_travel(sites, distances, robots, tasks, [r.home or None for r in team.robots])
 
 
 def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot, dict[str, str]]:
@@ -278,14 +314,16 @@ def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot
     on it, until the team can cover it again; a DONE task it cannot cover any more is left
     out and dropped from its dependents' prerequisites (they are satisfied). The rest is
     scheduled as usual."""
-    k = len(graph.capability_names)
-    vectors = [r.capabilities for r in team.robots] + [t.capabilities for t in graph.tasks]
-    if not graph.tasks or any(len(v) != k for v in vectors):
+    k = len(graph.capability_names) + len(graph.trait_names)
+    vectors = [(*r.capabilities, *(r.traits or (0.0,) * len(graph.trait_names))) for r in team.robots] + \
+        [(*t.capabilities, *(t.requires or (0.0,) * len(graph.trait_names))) for t in graph.tasks]
+    if not graph.tasks or any(len(v) != k for v in vectors) or team.trait_names != graph.trait_names:
         return graph, {}  # nothing to hold back, or malformed: build_instance says what is wrong
-    caps = np.array([r.capabilities for r in team.robots], dtype=bool).reshape(-1, k)
+    caps = np.array(vectors[:len(team.robots)], dtype=np.float64).reshape(-1, k)  # amounts (0/1 capabilities)
     payloads = np.array([r.payload for r in team.robots], dtype=np.float64)
-    team_caps: np.ndarray = np.asarray(caps.any(axis=0))
+    team_caps: np.ndarray = caps.sum(axis=0)
     team_payload: np.ndarray | float = float(payloads.sum())
+    able: np.ndarray | None = None
     if graph.sites:  # with travel, per task only the robots that can reach it at all
         try:
             tr = snapshot_travel(team, graph)
@@ -293,9 +331,13 @@ def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot
             return graph, {}  # build_instance says what is wrong
         n, m = len(team.robots), len(graph.tasks)
         able = np.isfinite(tr.arrivals(range(n), tr.robot_site, range(m))).astype(np.float64)  # (N, M)
-        team_caps, team_payload = np.asarray(able.T @ caps.astype(np.float64) > 0), able.T @ payloads
-    need = np.array([t.capabilities for t in graph.tasks], dtype=bool).reshape(-1, k)
+        team_caps, team_payload = able.T @ caps, able.T @ payloads
+    need = np.array(vectors[len(team.robots):], dtype=np.float64).reshape(-1, k)
     ok = covered(team_caps, team_payload, need, np.array([t.payload for t in graph.tasks], dtype=np.float64))
+    for j, t in enumerate(graph.tasks):  # with roles, the rule itself
+        if ok[j] and (t.roles == 2 or (t.roles == 0 and graph.roles)):
+            rows = slice(None) if able is None else able[:, j] > 0
+            ok[j] = covers(caps[rows], payloads[rows], need[j], t.payload, roles=True)
     if ok.all():
         return graph, {}
     done_gone = {t.id for t, c in zip(graph.tasks, ok, strict=True) if not c and t.status == TaskStatus.DONE}

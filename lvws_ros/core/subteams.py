@@ -267,9 +267,12 @@ def grow(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_p
 
 
 def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
-                   need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
+                   need_payload: float, roles: bool = False, traits_from: int | None = None) -> tuple[int, ...] | None:
     """GRP's subteam: an inclusion-minimal covering subteam of small total payload (ties:
-    fewer robots, then lower indices), or None when all of them cannot cover.
+    fewer robots, then lower indices), or None when all of them cannot cover. With
+    additive traits (columns ``traits_from`` on), the least surplus after the payload: the
+    amounts of those traits the subteam ties up beyond the need, each trait in units of
+    the largest amount a candidate has of it.
 
     Built constructively, never by enumerating subsets: the lightest robot that covers
     alone; the teams :func:`grow` builds (both payload fills) and :func:`prune` trims
@@ -285,8 +288,10 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
     options: list[list[int]] = []
     alone = [int(i) for i in np.flatnonzero(covered(caps, payloads, need_caps[None, :], need_payload))
              if covers(caps[[i]], payloads[[i]], need_caps, need_payload, roles)]
-    if alone:
+    if alone and traits_from is None:
         options.append([min(alone, key=lambda i: (float(payloads[i]), i))])
+    else:
+        options += [[i] for i in alone]
     heaviest_first = list(np.argsort(-payloads, kind="stable"))
     seeds: list[int | None] = [None]
     holds = (np.asarray(caps) > 0) & (np.asarray(need_caps) > TOLERANCE)[None, :]
@@ -303,7 +308,17 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
             if team is not None:
                 options.append(prune(sorted(team, key=heaviest_first.index), caps, payloads, need_caps, need_payload,
                                      roles=roles))
-    best = min(options, key=lambda t: (float(payloads[t].sum()), len(t), sorted(t)))
+    if traits_from is None:
+        best = min(options, key=lambda t: (float(payloads[t].sum()), len(t), sorted(t)))
+        return tuple(sorted(best))
+    amounts = np.asarray(caps, dtype=np.float64)[:, traits_from:]
+    unit = np.where(amounts.max(axis=0, initial=0.0) > 0, amounts.max(axis=0, initial=0.0), 1.0)
+    need = np.asarray(need_caps, dtype=np.float64)[traits_from:]
+
+    def surplus(t: list[int]) -> float:
+        return float(((amounts[t].sum(axis=0) - need) / unit).sum())
+
+    best = min(options, key=lambda t: (float(payloads[t].sum()), round(surplus(t), 9), len(t), sorted(t)))
     return tuple(sorted(best))
 
 

@@ -35,6 +35,7 @@ class _SequentialPolicy:
     def __init__(self, seed: int = 0) -> None:
         self.seed = seed
         self.rng = np.random.default_rng(seed)
+        self.traits_from: int | None = None  # the first column of additive traits (None: the paper's model)
 
     def reset(self, instance: Instance) -> None:
         self.rng = np.random.default_rng(self.seed)
@@ -60,6 +61,7 @@ class _SequentialPolicy:
 
     def decide(self, state: State) -> Decision:
         inst = state.instance
+        self.traits_from = len(inst.capabilities) if inst.traits else None
         free = np.array(state.free_robots(), dtype=np.int64)
         order = np.array(self.order(state.ready_tasks()), dtype=np.int64)
         out = []
@@ -104,7 +106,7 @@ class GreedyPayloadPolicy(_SequentialPolicy):
 
     def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
              need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
-        return lightest_cover(caps, payloads, need_caps, need_payload, roles)
+        return lightest_cover(caps, payloads, need_caps, need_payload, roles, self.traits_from)
 
 
 class RandomPolicy(_SequentialPolicy):

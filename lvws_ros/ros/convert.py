@@ -42,6 +42,7 @@ def _stamped(msg: Any, snap: TeamSnapshot | GraphSnapshot, frame_id: str) -> Any
     msg.header.stamp = to_time(snap.stamp)
     msg.header.frame_id = frame_id
     msg.capability_names = list(snap.capability_names)
+    msg.trait_names = list(snap.trait_names)
     return msg
 
 
@@ -50,20 +51,23 @@ def team_to_msg(snap: TeamSnapshot, frame_id: str = "map") -> TeamState:
     for r in snap.robots:
         rs = RobotState(id=r.id, kind=r.kind, available=r.available, capabilities=list(r.capabilities),
                         payload=float(r.payload), current_task=r.current_task, busy_for=float(r.busy_for),
-                        site=r.site, speed=float(r.speed))
+                        site=r.site, speed=float(r.speed), traits=[float(a) for a in r.traits], home=r.home)
         rs.pose.x, rs.pose.y, rs.pose.theta = r.pose
         msg.robots.append(rs)
     return msg
 
 
 def team_from_msg(msg: Any) -> TeamSnapshot:
-    """(Messages recorded before the travel fields read as zero travel.)"""
+    """(Messages recorded before the travel fields read as zero travel, before the trait
+    fields as no traits.)"""
     return TeamSnapshot(
         from_time(msg.header.stamp), tuple(msg.capability_names),
         tuple(RobotInfo(r.id, r.kind, bool(r.available), tuple(int(c) for c in r.capabilities), float(r.payload),
                         r.current_task, float(r.busy_for), (float(r.pose.x), float(r.pose.y), float(r.pose.theta)),
-                        str(getattr(r, "site", "")), float(getattr(r, "speed", 0.0)))
-              for r in msg.robots))
+                        str(getattr(r, "site", "")), float(getattr(r, "speed", 0.0)),
+                        tuple(float(a) for a in getattr(r, "traits", ())), str(getattr(r, "home", "")))
+              for r in msg.robots),
+        tuple(getattr(msg, "trait_names", ())))
 
 
 def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
@@ -73,9 +77,11 @@ def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
                               payload=float(t.payload), duration=float(t.duration),
                               prerequisites=list(t.prerequisites), assigned_robots=list(t.assigned_robots),
                               start_time=to_time(t.start or 0.0), end_time=to_time(t.end or 0.0),
-                              site_from=t.site_from, site_to=t.site_to))
+                              site_from=t.site_from, site_to=t.site_to, requires=[float(a) for a in t.requires],
+                              roles=int(t.roles)))
     msg.sites = [Site(id=name, x=float(x), y=float(y)) for name, x, y in snap.sites]
     msg.site_distances = [float(d) for d in snap.distances]
+    msg.roles, msg.objective = bool(snap.roles), snap.objective
     return msg
 
 
@@ -87,10 +93,13 @@ def graph_from_msg(msg: Any) -> GraphSnapshot:
         end = from_time(t.end_time) if status == TaskStatus.DONE else None
         tasks.append(TaskInfo(t.id, status, tuple(int(c) for c in t.capabilities), float(t.payload),
                               float(t.duration), tuple(t.prerequisites), tuple(t.assigned_robots), start, end,
-                              str(getattr(t, "site_from", "")), str(getattr(t, "site_to", ""))))
+                              str(getattr(t, "site_from", "")), str(getattr(t, "site_to", "")),
+                              tuple(float(a) for a in getattr(t, "requires", ())), int(getattr(t, "roles", 0))))
     sites = tuple((str(s.id), float(s.x), float(s.y)) for s in getattr(msg, "sites", ()))
     return GraphSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names), tuple(tasks), sites,
-                         tuple(float(d) for d in getattr(msg, "site_distances", ())))
+                         tuple(float(d) for d in getattr(msg, "site_distances", ())),
+                         tuple(getattr(msg, "trait_names", ())), bool(getattr(msg, "roles", False)),
+                         str(getattr(msg, "objective", "")))
 
 
 def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:

@@ -41,6 +41,7 @@ class RobotSpec:
     cell: str | None = None  # arms: their cell
     start: tuple[float, float] = (0.0, 0.0)
     speed: float = 0.0
+    traits: tuple[tuple[str, float], ...] = ()  # additive traits it brings (formats.md, "Traits")
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,7 @@ class TaskSpec:
     duration: float = 0.0  # assembly: work time
     payload: float = 0.0  # assembly: the part the arm handles
     after: tuple[str, ...] = ()
+    requires: tuple[tuple[str, float], ...] = ()  # additive traits its subteam adds up
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,7 @@ class CellConfig:
     # the mobile robots' start points as sites; robots arrive when the plan says; transports
     # carry at nominal_speed. False (a file without the key): no travel in the plan, as before.
     plan_travel: bool = False
+    traits: tuple[str, ...] = ()  # additive trait names (robots' `traits`, tasks' `requires`); none: as before
 
 
 def start_site(robot_id: str) -> str:
@@ -137,12 +140,21 @@ def _robot(r: dict[str, Any], cells: Mapping[str, CellSpec]) -> RobotSpec:
     if kind not in ARM_KINDS + MOBILE_KINDS:
         raise ConfigError(f"robot {r['id']}: unknown kind {kind!r} (known: {ARM_KINDS + MOBILE_KINDS})")
     payload = _num(r["payload"], f"robot {r['id']} payload")
+    traits = _amounts(r.get("traits", {}), f"robot {r['id']} traits")
     if kind in ARM_KINDS:
         if r.get("cell") not in cells:
             raise ConfigError(f"robot {r['id']}: unknown cell {r.get('cell')!r}")
-        return RobotSpec(str(r["id"]), kind, payload, cell=str(r["cell"]), start=cells[r["cell"]].position)
+        return RobotSpec(str(r["id"]), kind, payload, cell=str(r["cell"]), start=cells[r["cell"]].position,
+                         traits=traits)
     return RobotSpec(str(r["id"]), kind, payload, start=_xy(r["start"], f"robot {r['id']} start"),
-                     speed=_num(r["speed"], f"robot {r['id']} speed"))
+                     speed=_num(r["speed"], f"robot {r['id']} speed"), traits=traits)
+
+
+def _amounts(value: Any, what: str) -> tuple[tuple[str, float], ...]:
+    """A ``traits``/``requires`` mapping: trait name -> amount >= 0 (the instance checks the names)."""
+    if not isinstance(value, dict):
+        raise ConfigError(f"{what}: expected a mapping of trait names to amounts, got {value!r}")
+    return tuple((str(k), _num(v, f"{what} {k}", positive=False)) for k, v in value.items())
 
 
 def parse_task(t: dict[str, Any], cells: Mapping[str, CellSpec], objects: Mapping[str, ObjectSpec]) -> TaskSpec:
@@ -151,18 +163,20 @@ def parse_task(t: dict[str, Any], cells: Mapping[str, CellSpec], objects: Mappin
     if t.get("object") not in objects:
         raise ConfigError(f"task {tid}: unknown object {t.get('object')!r}")
     after = tuple(str(a) for a in t.get("after", ()))
+    requires = _amounts(t.get("requires", {}), f"task {tid} requires")
     if t["type"] == "transport":
         for key in ("from", "to"):
             if t.get(key) not in cells:
                 raise ConfigError(f"task {tid}: unknown cell {t.get(key)!r} in {key!r}")
-        return TaskSpec(tid, "transport", str(t["object"]), str(t["to"]), source=str(t["from"]), after=after)
+        return TaskSpec(tid, "transport", str(t["object"]), str(t["to"]), source=str(t["from"]), after=after,
+                        requires=requires)
     if t["type"] == "assembly":
         if t.get("cell") not in cells:
             raise ConfigError(f"task {tid}: unknown cell {t.get('cell')!r}")
         return TaskSpec(tid, "assembly", str(t["object"]), str(t["cell"]),
                         duration=_num(t["duration"], f"task {tid} duration"),
                         payload=_num(t.get("payload", PART_PAYLOAD), f"task {tid} payload", positive=False),
-                        after=after)
+                        after=after, requires=requires)
     raise ConfigError(f"task {tid}: unknown type {t['type']!r} (transport | assembly)")
 
 
@@ -237,7 +251,8 @@ def _parse_config(d: dict[str, Any]) -> CellConfig:
                                                                   positive=False),
         arrive_tolerance=_num(sim.get("arrive_tolerance", 0.05), "sim.arrive_tolerance"),
         nominal_speed=_num(d.get("nominal_speed", 0.8), "nominal_speed"),
-        cells=cells, robots=robots, objects=objects, tasks=tasks, plan_travel=plan_travel)
+        cells=cells, robots=robots, objects=objects, tasks=tasks, plan_travel=plan_travel,
+        traits=tuple(str(c) for c in d.get("traits", ())))
 
 
 def _flag(value: Any, what: str) -> bool:

@@ -97,7 +97,7 @@ def build_instance(cfg: CellConfig) -> Instance:
 
     robots = tuple(
         Robot(r.id, vec("manipulation", f"@{r.cell}") if r.kind in ARM_KINDS else vec("mobility"), r.payload,
-              {"kind": r.kind}) for r in cfg.robots)
+              {"kind": r.kind}, traits=r.traits) for r in cfg.robots)
     tasks = []
     for t in cfg.tasks:
         weight = cfg.objects[t.object].weight
@@ -105,11 +105,13 @@ def build_instance(cfg: CellConfig) -> Instance:
             assert t.source is not None
             travel = _dist(cfg.cells[t.source].position, cfg.cells[t.cell].position) / cfg.nominal_speed
             tasks.append(Task(t.id, vec("mobility"), weight, round(2 * cfg.handling_time + travel, 3), t.after,
-                              {"type": t.type, "object": t.object, "from": t.source, "to": t.cell}))
+                              {"type": t.type, "object": t.object, "from": t.source, "to": t.cell},
+                              requires=t.requires))
         else:
             tasks.append(Task(t.id, vec("manipulation", f"@{t.cell}"), t.payload, t.duration, t.after,
-                              {"type": t.type, "object": t.object, "cell": t.cell}))
-    return Instance(cfg.name, caps, robots, tuple(tasks), travel=_travel(cfg) if cfg.plan_travel else None)
+                              {"type": t.type, "object": t.object, "cell": t.cell}, requires=t.requires))
+    return Instance(cfg.name, caps, robots, tuple(tasks), travel=_travel(cfg) if cfg.plan_travel else None,
+                    traits=cfg.traits)
 
 
 @dataclass
@@ -568,8 +570,13 @@ class CellSim:
                 site = self._task_spec[task].cell if task is not None else self.robot_site[r.id]
                 speed = r.speed if r.kind in MOBILE_KINDS else 0.0
             robots.append(RobotInfo(r.id, r.kind, task is None, caps, r.payload, task or "", busy, (x, y, 0.0),
-                                    site, speed))
-        return TeamSnapshot(self.time, self.cfg.capabilities, tuple(robots))
+                                    site, speed, self._amounts(r.traits)))
+        return TeamSnapshot(self.time, self.cfg.capabilities, tuple(robots), self.inst.traits)
+
+    def _amounts(self, pairs: Sequence[tuple[str, float]]) -> tuple[float, ...]:
+        """Trait amounts in the order of the instance's trait names (none without traits)."""
+        given = dict(pairs)
+        return tuple(float(given.get(name, 0.0)) for name in self.inst.traits)
 
     def graph_snapshot(self) -> GraphSnapshot:
         tasks = []
@@ -577,18 +584,17 @@ class CellSim:
         for j, t in enumerate(self.inst.tasks):
             sites = ("", "") if tr is None else (tr.sites[tr.task_from[j]], tr.sites[tr.task_to[j]])
             tasks.append(TaskInfo(t.id, self.status[t.id], t.capabilities, t.payload, t.duration, t.after,
-                                  self.team.get(t.id, ()), self.start.get(t.id), self.end.get(t.id), *sites))
-        if tr is None:
-            return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks))
-        return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks), *graph_sites(tr))
+                                  self.team.get(t.id, ()), self.start.get(t.id), self.end.get(t.id), *sites,
+                                  self._amounts(t.requires)))
+        where = ((), ()) if tr is None else graph_sites(tr)
+        return GraphSnapshot(self.time, self.cfg.capabilities, tuple(tasks), *where, self.inst.traits)
 
     # -- results ----------------------------------------------------------------------
     def executed_instance(self) -> Instance:
         """The instance with each finished task's executed duration (travel included)."""
-        tasks = tuple(Task(t.id, t.capabilities, t.payload,
-                           (self.end[t.id] - self.start[t.id]) if t.id in self.end else t.duration, t.after, t.extra)
+        tasks = tuple(replace(t, duration=(self.end[t.id] - self.start[t.id]) if t.id in self.end else t.duration)
                       for t in self.inst.tasks)
-        return Instance(self.inst.name, self.inst.capabilities, self.inst.robots, tasks, travel=self.inst.travel)
+        return replace(self.inst, tasks=tasks)
 
     def schedule(self, policy: str, decisions: int = 0, compute: float = 0.0) -> Schedule:
         out = [Assignment(t, self.team[t], self.start[t], self.end[t]) for t in self.end]

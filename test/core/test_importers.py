@@ -89,7 +89,7 @@ def test_bad_mspsp_files_name_the_line_or_the_item(tmp_path, text, message):
 def test_the_datazinc_reader_takes_values_not_code():
     data = parse_dzn("a = 1; % note\nb = [| true, false | false, true |];\nc = {1, 2};\nd = [];", "x.dzn")
     assert data == {"a": 1, "b": [[True, False], [False, True]], "c": [1, 2], "d": []}
-    with pytest.raises(InstanceError, match="x.dzn line 1"):
+    with pytest.raises(InstanceError, match=r"x\.dzn line 1"):
         parse_dzn('a = "import os";', "x.dzn")
 
 

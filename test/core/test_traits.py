@@ -217,11 +217,13 @@ def test_return_makespan_counts_the_way_home():
 POLICIES = ["grp", "rand", "rand_subteam", "lvws", "dbgm", "lvws_sample", "exact"]
 
 
-@pytest.mark.parametrize("family", TRAIT_FAMILIES)
+@pytest.mark.parametrize("family", [*TRAIT_FAMILIES, "weld-cell"])
 def test_every_policy_is_valid_on_trait_instances(family):
-    for index in range(4):
-        inst = family_instance(family, index, 0)
-        for name in POLICIES:
+    """The trait families, and the weld cell: traits alone, roles, travel, a fixed arm and
+    the objective "return"."""
+    for index in range(1 if family == "weld-cell" else 4):
+        inst = load_instance(EXAMPLE) if family == "weld-cell" else family_instance(family, index, 0)
+        for name in [*POLICIES, "auto"] if family == "weld-cell" else POLICIES:
             opts = {"time_limit": 5, "workers": 2} if name == "exact" else {}
             s = simulate(inst, make_policy(name, seed=index, **opts)).schedule
             assert check_schedule(inst, s) == [], (inst.name, name)
