@@ -52,6 +52,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
     from lvws_ros.registry import make_policy
 
     inst = load_instance(args.instance)
+    if args.noise is not None:
+        from lvws_ros.sim.instance_world import check_noise
+
+        check_noise(args.noise)
     options: dict[str, object] = {}
     if args.policy == "exact":
         options = {"time_limit": args.time_limit, "workers": args.workers}
@@ -93,6 +97,16 @@ def cmd_solve(args: argparse.Namespace) -> int:
               f"{improved.get('sample', 0)} times; "
               f"{'proven optimal' if getattr(policy, 'proven', False) else 'not proven optimal'}; seed {args.seed}",
               file=sys.stderr)
+    if args.noise is not None:
+        from lvws_ros.sim.instance_world import run_noisy
+
+        run = run_noisy(inst, lambda: make_policy(args.policy, seed=args.seed, **options), args.noise,
+                        args.noise_seed)
+        print(f"{policy.name}: with duration noise {args.noise:g} (noise seed {args.noise_seed}): planned "
+              f"{run.planned.makespan:g}, executed {run.executed.makespan:g} online in "
+              f"{run.decisions} decisions", file=sys.stderr)
+        result.schedule.extra.update({"noise": args.noise, "noise_seed": args.noise_seed,
+                                      "executed_makespan": run.executed.makespan})
     if args.out:
         save_schedule(result.schedule, args.out)
     sys.stdout.write(dumps(schedule_to_dict(result.schedule)))
@@ -340,6 +354,10 @@ def add_parsers(add: Adder) -> None:
                    help="lvws_sample: scale of the Gumbel noise on R (default: its DEFAULT_TEMPERATURE; 0: LVWS)")
     p.add_argument("--matching", choices=("greedy", "exact"), default=None,
                    help="lvws: Eqs. 7-11 on R by the paper's greedy (default) or exactly by CP-SAT")
+    p.add_argument("--noise", type=float, default=None,
+                   help="also run the policy online in a world where each task takes its duration x a seeded "
+                        "factor in [1-NOISE, 1+NOISE] and print planned against executed makespan")
+    p.add_argument("--noise-seed", type=int, default=0, help="the noise's seed (with --noise)")
     p.add_argument("--out", help="also write the schedule to this file")
 
     p = add("import", cmd_import, "turn a multi-skill project scheduling file (MiniZinc data, .dzn) or CSV files "

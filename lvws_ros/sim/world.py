@@ -32,7 +32,6 @@ offline runner and the tests drive it.
 from __future__ import annotations
 
 import math
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -58,6 +57,7 @@ from lvws_ros.sim.config import (
     parse_task,
     start_site,
 )
+from lvws_ros.sim.instance_world import check_noise, duration_factor
 
 __all__ = ["CellSim", "Event", "Frame", "build_instance"]
 
@@ -152,10 +152,8 @@ class CellSim:
     """The case-study world. ``assign`` starts tasks, ``step`` advances sim time by dt."""
 
     def __init__(self, cfg: CellConfig, share_travel: bool = True, noise: float = 0.0, noise_seed: int = 0) -> None:
-        if not 0.0 <= noise < 1.0:
-            raise ConfigError(f"duration noise must be in [0, 1), got {noise!r}")
         # duration noise: each task takes its duration times a seeded factor in [1 - noise, 1 + noise]
-        self.noise, self.noise_seed = float(noise), int(noise_seed)
+        self.noise, self.noise_seed = check_noise(noise), int(noise_seed)
         self.cfg = cfg
         # False: the snapshots leave the travel out (a travel-blind scheduler in the same
         # world, for comparison); the world still moves by the plan's travel
@@ -316,10 +314,7 @@ class CellSim:
         """How much longer (or shorter) than its duration task ``task_id`` takes here: 1
         without noise, else 1 + noise x U(-1, 1) drawn from the noise seed and the task's
         id (the same factor for the same task in every run; tasks added later get theirs)."""
-        if self.noise == 0.0:
-            return 1.0
-        u = np.random.default_rng([self.noise_seed, zlib.crc32(task_id.encode())]).random()
-        return 1.0 + self.noise * (2.0 * u - 1.0)
+        return duration_factor(self.noise, self.noise_seed, task_id)
 
     def _travel_time(self, rid: str, site: str) -> float:
         """Seconds the plan gives robot ``rid`` from where it is to ``site`` (plan_travel):
