@@ -80,8 +80,10 @@ def covered(team_caps: npt.ArrayLike, team_payload: npt.ArrayLike, need_caps: np
             need_payload: npt.ArrayLike) -> BoolArray:
     """Eqs. 10-11, broadcast like :func:`shortfall`: True where nothing is missing (without
     roles; with roles this is a necessary condition, :func:`covers` the rule)."""
-    missing, short = shortfall(team_caps, team_payload, need_caps, need_payload)
-    return np.asarray((missing == 0.0).all(axis=-1) & (short == 0.0))
+    # shortfall's comparisons, without building what is missing (NaN: not covered)
+    missing = np.asarray(need_caps, dtype=np.float64) - np.asarray(team_caps, dtype=np.float64)
+    short = np.asarray(need_payload, dtype=np.float64) - np.asarray(team_payload, dtype=np.float64)
+    return np.asarray((missing <= TOLERANCE).all(axis=-1) & (short <= TOLERANCE))
 
 
 def covers(caps: npt.ArrayLike, payloads: FloatArray, need_caps: npt.ArrayLike, need_payload: float,
@@ -287,7 +289,7 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
         return None
     options: list[list[int]] = []
     alone = [int(i) for i in np.flatnonzero(covered(caps, payloads, need_caps[None, :], need_payload))
-             if covers(caps[[i]], payloads[[i]], need_caps, need_payload, roles)]
+             if not roles or covers(caps[[i]], payloads[[i]], need_caps, need_payload, roles)]
     if alone and traits_from is None:
         options.append([min(alone, key=lambda i: (float(payloads[i]), i))])
     else:
