@@ -99,6 +99,39 @@ def bench_expert(count: int, workers: int, time_limit: float, seed: int) -> dict
     return optimal
 
 
+def bench_mspsp(folder: str, workers: int, time_limit: float, limit: int | None = None,
+                results: str | None = None) -> None:
+    """The exact expert on multi-skill project scheduling files (``*.dzn`` under ``folder``,
+    imported with :func:`~lvws_ros.core.importers.import_mspsp`); with ``results`` (a folder
+    holding the library's results files, ``instNum,optimal,...,makespan`` per group of
+    instances), the optimum they report is printed beside."""
+    import csv
+    from pathlib import Path
+
+    from lvws_ros.core.importers import import_mspsp
+
+    files = sorted(Path(folder).rglob("*.dzn"))[:limit]
+    print(f"\n## Multi-skill project scheduling: {len(files)} files under {folder} "
+          f"(exact expert, {workers} workers, limit {time_limit:g} s)")
+    print("| file | robots x tasks | ours | status | bound | seconds | their optimum |\n|---|---|---|---|---|---|---|")
+    proven = equal = 0
+    for path in files:
+        inst = import_mspsp(path)
+        res = solve_exact(inst, workers=workers, time_limit=time_limit)
+        group, _, index = path.stem.rpartition("_")
+        theirs = "-"
+        for found in Path(results).rglob(f"{group.replace('inst_', 'results_')}*.txt") if results else ():
+            with found.open() as f:
+                rows = [r for r in csv.DictReader(f) if r.get("instNum") == str(int(index))]
+            if rows and rows[0].get("optimal") == "1":
+                theirs = rows[0]["makespan"]
+        proven += res.proven
+        equal += res.proven and theirs != "-" and float(theirs) == res.makespan
+        print(f"| {path.stem} | {inst.num_robots} x {inst.num_tasks} | {res.makespan:g} | {res.status} | "
+              f"{res.bound:g} | {res.seconds:.1f} | {theirs} |")
+    print(f"proven optimal: {proven}/{len(files)}; equal to the optimum the library reports: {equal}")
+
+
 def bench_baselines(count: int, seed: int, workers: int, time_limit: float) -> None:
     spec = DATASETS["I"]
     print(f"\n## Baselines on the Dataset I test split ({count} instances, dataset seed {seed}, policy seed 0)")
@@ -298,7 +331,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-limit", type=float, default=60.0)
     parser.add_argument("--model", default=None, help="LVWS checkpoint for Fig. 5 (default: the shipped one)")
     parser.add_argument("--fig5-png", default="docs/fig5.png")
-    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale"], default=None)
+    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale", "mspsp"], default=None)
+    parser.add_argument("--mspsp-dir", default=None,
+                        help="a folder of multi-skill project scheduling files (.dzn, e.g. a checkout of the MSPSP "
+                             "instance library's instances/set-1/set-1a): the exact expert on each (--only mspsp)")
+    parser.add_argument("--mspsp-count", type=int, default=None, help="only the first COUNT files")
+    parser.add_argument("--mspsp-results", default=None, help="the library's results folder (their optima)")
     parser.add_argument("--scale-limit", type=float, default=600.0, help="wall seconds per whole-schedule run")
     args = parser.parse_args(argv)
     print(f"# lvws_ros benchmarks — {machine()}")
@@ -317,6 +355,10 @@ def main(argv: list[str] | None = None) -> int:
         bench_runtime()
     if args.only in (None, "dynamic"):
         bench_dynamic()
+    if args.only == "mspsp" or (args.only is None and args.mspsp_dir):
+        if not args.mspsp_dir:
+            parser.error("--only mspsp needs --mspsp-dir")
+        bench_mspsp(args.mspsp_dir, args.workers, args.time_limit, args.mspsp_count, args.mspsp_results)
     return 0
 
 
