@@ -24,12 +24,15 @@ __all__ = ["import_csv", "import_mspsp", "parse_dzn"]
 
 # ---------------------------------------------------------------- DataZinc (MSPSP)
 
-_TOKEN = re.compile(r"\s*(?:(?P<num>-?\d+)|(?P<word>true|false)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|"
+_TOKEN = re.compile(r"\s*(?:(?P<num>-?\d+)|(?P<word>(?:true|false)(?![A-Za-z0-9_]))|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|"
                     r"(?P<sym>\[\||\|\]|[\[\]{},|=;]))")
 
 
 def _line(text: str, pos: int) -> int:
     return text.count("\n", 0, pos) + 1
+
+
+MAX_DZN_DEPTH = 8  # the MSPSP files nest 2 levels
 
 
 def parse_dzn(text: str, where: str) -> dict[str, Any]:
@@ -68,15 +71,17 @@ def parse_dzn(text: str, where: str) -> dict[str, Any]:
         k += 1
         return tok
 
-    def value_at() -> Any:
+    def value_at(depth: int = 0) -> Any:
         kind, val, at = take()
         if kind in ("num", "word"):
             return val
+        if depth >= MAX_DZN_DEPTH:
+            raise InstanceError(f"{where} line {_line(text, at)}: nested deeper than {MAX_DZN_DEPTH} levels")
         if val in ("[", "{"):
             close = "]" if val == "[" else "}"
             items = []
             while tokens[k][1] != close if k < len(tokens) else False:
-                items.append(value_at())
+                items.append(value_at(depth + 1))
                 if k < len(tokens) and tokens[k][1] == ",":
                     take(",")
             take(close)
@@ -88,7 +93,7 @@ def parse_dzn(text: str, where: str) -> dict[str, Any]:
                     take("|")
                     rows.append([])
                     continue
-                rows[-1].append(value_at())
+                rows[-1].append(value_at(depth + 1))
                 if k < len(tokens) and tokens[k][1] == ",":
                     take(",")
             take("|]")
@@ -127,8 +132,9 @@ def import_mspsp(path: str | Path) -> Instance:
     benchmarks: ``nActs``, ``dur``, ``nSkills``, ``sreq``, ``nResources``, ``mastery``,
     ``pred``/``succ``) as traits with roles, exactly: each resource is a robot with amount 1
     of each skill it masters, each activity a task requiring ``sreq`` units of each skill,
-    and with roles each member fills one skill slot. The source and sink activities (no
-    duration, no requirement) are dropped, their precedences kept through them."""
+    and with roles each member fills one skill slot. Activities without duration (the
+    source and sink, and any other: they hold no worker for any time) are dropped, their
+    precedences kept through them."""
     p = Path(path)
     where = str(p)
     try:
@@ -145,10 +151,8 @@ def import_mspsp(path: str | Path) -> Instance:
     mastery = _table(data, "mastery", where, n_res, n_skills, bool)
     pred, succ = _ints(data, "pred", where), _ints(data, "succ", where, len(_ints(data, "pred", where)))
     skills = [f"skill{s + 1}" for s in range(n_skills)]
-    keep = [a for a in range(n_acts) if dur[a] > 0 or any(sreq[a])]
+    keep = [a for a in range(n_acts) if dur[a] > 0]
     for a in keep:
-        if dur[a] <= 0:
-            raise InstanceError(f"{where}: activity {a + 1} needs workers but lasts {dur[a]}: a task lasts > 0")
         if not any(sreq[a]):
             raise InstanceError(f"{where}: activity {a + 1} lasts {dur[a]} but needs no worker: lvws schedules "
                                 "tasks done by subteams")
@@ -159,21 +163,24 @@ def import_mspsp(path: str | Path) -> Instance:
         before[b - 1].add(a - 1)
     kept = set(keep)
 
-    def kept_before(a: int, seen: set[int]) -> set[int]:  # through dropped activities
+    def kept_before(a: int) -> set[int]:  # through dropped activities
         out: set[int] = set()
-        for q in before[a]:
+        stack, seen = list(before[a]), set(before[a])
+        while stack:
+            q = stack.pop()
             if q in kept:
                 out.add(q)
-            elif q not in seen:
-                seen.add(q)
-                out |= kept_before(q, seen)
+                continue
+            for p in before[q] - seen:
+                seen.add(p)
+                stack.append(p)
         return out
 
     robots = tuple(Robot(f"res{r + 1}", (), 0.0, traits=tuple((skills[s], 1.0) for s in range(n_skills)
                                                                if mastery[r][s]))
                    for r in range(n_res))
     tasks = tuple(Task(f"act{a + 1}", (), 0.0, float(dur[a]),
-                       tuple(f"act{q + 1}" for q in sorted(kept_before(a, set()))),
+                       tuple(f"act{q + 1}" for q in sorted(kept_before(a))),
                        requires=tuple((skills[s], float(sreq[a][s])) for s in range(n_skills) if sreq[a][s]))
                   for a in keep)
     try:
@@ -190,7 +197,7 @@ _TASK_COLUMNS = {"id", "duration", "after", "site", "from", "to", "roles"}
 
 def _rows(path: Path) -> tuple[list[str], list[tuple[int, dict[str, str]]]]:
     try:
-        with path.open(newline="", encoding="utf-8") as f:
+        with path.open(newline="", encoding="utf-8-sig") as f:  # utf-8-sig: a spreadsheet's byte-order mark
             reader = csv.DictReader(f)
             rows = [(reader.line_num, row) for row in reader]
             header = list(reader.fieldnames or [])
@@ -200,9 +207,16 @@ def _rows(path: Path) -> tuple[list[str], list[tuple[int, dict[str, str]]]]:
         raise InstanceError(f"{path} line 1: the header needs an 'id' column, got {header}")
     if len(set(header)) != len(header):
         raise InstanceError(f"{path} line 1: duplicate column names in {header}")
+    seen: dict[str, int] = {}
     for line, row in rows:
         if None in row or any(v is None for v in row.values()):
             raise InstanceError(f"{path} line {line}: {len(header)} columns expected")
+        rid = row["id"].strip()
+        if not rid:
+            raise InstanceError(f"{path} line {line}: id: empty")
+        if rid in seen:
+            raise InstanceError(f"{path} line {line}: id {rid!r} already on line {seen[rid]}")
+        seen[rid] = line
     return header, rows
 
 
@@ -228,6 +242,9 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
     r_head, r_rows = _rows(rp)
     t_head, t_rows = _rows(tp)
     traits = [c for c in r_head if c not in _ROBOT_COLUMNS]
+    taken = [c for c in traits if c in _TASK_COLUMNS]
+    if taken:
+        raise InstanceError(f"{rp} line 1: column(s) {taken} are task fields, not traits: name the traits otherwise")
     unknown = [c for c in t_head if c not in _TASK_COLUMNS and c not in traits]
     if unknown:
         raise InstanceError(f"{tp} line 1: column(s) {unknown} are neither task fields nor robot traits "
@@ -238,11 +255,12 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
     if sites_csv is not None:
         sp = Path(sites_csv)
         try:
-            with sp.open(newline="", encoding="utf-8") as f:
+            with sp.open(newline="", encoding="utf-8-sig") as f:
                 reader = csv.reader(f)
                 for cells in reader:
                     where = f"{sp} line {reader.line_num}"
-                    if reader.line_num == 1 and cells and cells[0].strip().lower() == "name":
+                    if not any(c.strip() for c in cells) or \
+                            (reader.line_num == 1 and cells and cells[0].strip().lower() == "name"):
                         continue
                     if len(cells) != 3:
                         raise InstanceError(f"{where}: expected name,x,y")
@@ -256,23 +274,34 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
         amounts = tuple((c, _amount(row[c], f"{where}: {c}")) for c in traits if row[c].strip())
         robots.append(Robot(rid, (), 0.0, traits=tuple((c, a) for c, a in amounts if a > 0)))
         if sites:
-            site = row.get("site", "").strip()
+            site, home = row.get("site", "").strip(), row.get("home", "").strip()
             if not site:
                 raise InstanceError(f"{where}: site: every robot needs a site when there are sites")
+            for what, name in (("site", site), ("home", home)):
+                if name and name not in sites:
+                    raise InstanceError(f"{where}: {what}: unknown site {name!r} (sites: {', '.join(list(sites)[:10])})")
             speed = row.get("speed", "").strip()
+            if home and home != site and not speed:
+                raise InstanceError(f"{where}: home: a fixed robot (no speed) stays at its site {site!r}")
             robot_sites.append((rid, site, _amount(speed, f"{where}: speed", positive=True) if speed else None))
-            homes.append(row.get("home", "").strip() or None)
+            homes.append(home or None)
         elif any(row.get(c, "").strip() for c in ("site", "speed", "home")):
             raise InstanceError(f"{where}: site, speed and home need the sites file (--sites)")
     tasks, task_sites = [], []
+    known = {row["id"].strip() for _, row in t_rows}
     for line, row in t_rows:
         where = f"{tp} line {line}"
         tid = row["id"].strip()
+        if not sites and any(row.get(c, "").strip() for c in ("site", "from", "to")):
+            raise InstanceError(f"{where}: site, from and to need the sites file (--sites)")
         needs = tuple((c, _amount(row[c], f"{where}: {c}")) for c in traits if c in row and row[c].strip())
         roles_text = row.get("roles", "").strip().lower()
         if roles_text not in ("", "true", "false", "1", "0", "yes", "no"):
             raise InstanceError(f"{where}: roles: expected true or false, got {row['roles']!r}")
         after = tuple(a for a in re.split(r"[\s;]+", row.get("after", "") or "") if a)
+        unknown_after = [a for a in after if a not in known]
+        if unknown_after:
+            raise InstanceError(f"{where}: after: unknown task id(s) {unknown_after}")
         tasks.append(Task(tid, (), 0.0, _amount(row["duration"], f"{where}: duration", positive=True), after,
                           requires=tuple((c, a) for c, a in needs if a > 0),
                           roles=None if not roles_text else roles_text in ("true", "1", "yes")))
@@ -281,13 +310,15 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
             b = row.get("site", "").strip() or row.get("to", "").strip()
             if not a or not b:
                 raise InstanceError(f"{where}: site (or from and to): every task needs one when there are sites")
+            for name in {a, b} - set(sites):
+                raise InstanceError(f"{where}: unknown site {name!r} (sites: {', '.join(list(sites)[:10])})")
             task_sites.append((tid, a, b))
     try:
         travel = build_travel(sites, {}, robot_sites, task_sites, homes) if sites else None
         return Instance(name or tp.stem, (), tuple(robots), tuple(tasks), travel=travel, traits=tuple(traits),
                         objective=objective)
-    except InstanceError as exc:
-        raise InstanceError(f"{tp}: {exc}") from None
+    except InstanceError as exc:  # what needs the whole instance (a cycle, a task no robot can cover)
+        raise InstanceError(f"{rp} and {tp}: {exc}") from None
 
 
 def _coord(text: str, where: str) -> float:

@@ -102,9 +102,11 @@ def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
     required traits so that every trait's given amounts add up to its need: the
     multi-skill project scheduling rule (a worker fills one skill slot of an activity).
     A depth-first search over the members (the most constrained first, the largest
-    contribution tried first), pruned by what the members left can still bring and by
-    the remaining needs already seen. Exponential in the worst case (with general amounts
-    the problem is NP-hard), fast for subteams of tens of robots."""
+    contribution tried first), pruned by what the members left can still bring to each
+    trait and in all (each fills one slot: at most its largest useful amount), by the
+    remaining needs already seen, and by symmetry (identical members take traits in
+    order). Exponential in the worst case (with general amounts the problem is NP-hard),
+    fast for subteams of tens of robots."""
     caps = np.atleast_2d(np.asarray(caps, dtype=np.float64))
     need_all = np.asarray(need_caps, dtype=np.float64)
     cols = np.flatnonzero(need_all > TOLERANCE)
@@ -112,26 +114,33 @@ def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
     a = a[(a > 0).any(axis=1)]
     if not len(need):
         return True
-    a = a[np.argsort((a > 0).sum(axis=1), kind="stable")]
-    rest = np.vstack([np.cumsum(a[::-1], axis=0)[::-1], np.zeros((1, len(need)))])  # what rows i.. bring
-    seen: set[tuple[int, bytes]] = set()
-    stack = [(0, need)]
+    a = a[np.lexsort((*a.T[::-1], (a > 0).sum(axis=1)))]  # fewest traits first; identical rows adjacent
+    n, k_all = a.shape
+    same = np.zeros(n, dtype=bool)
+    same[1:] = (a[1:] == a[:-1]).all(axis=1)
+    rest = np.vstack([np.cumsum(a[::-1], axis=0)[::-1], np.zeros((1, k_all))])  # what rows i.. bring
+    seen: set[tuple[int, bytes, int]] = set()
+    stack = [(0, need, 0)]  # (member, what is left, the choice of the member before when identical)
     while stack:
-        i, left = stack.pop()
+        i, left, floor = stack.pop()
         if (left <= TOLERANCE).all():
             return True
-        if i == len(a) or (rest[i] < left - TOLERANCE).any():
+        want = np.maximum(left, 0.0)
+        if i == n or (rest[i] < left - TOLERANCE).any() or \
+                np.minimum(a[i:], want[None, :]).max(axis=1).sum() < want.sum() - TOLERANCE:
             continue
-        key = (i, np.round(np.maximum(left, 0.0), 9).tobytes())
+        key = (i, np.round(want, 9).tobytes(), floor if same[i] else -1)
         if key in seen:
             continue
         seen.add(key)
-        stack.append((i + 1, left))  # this member fills no slot (tried last)
-        useful = np.flatnonzero((a[i] > 0) & (left > TOLERANCE))
-        for k in useful[np.argsort(np.minimum(a[i, useful], left[useful]), kind="stable")]:
+        low = floor if same[i] else 0
+        nxt_same = i + 1 < n and same[i + 1]
+        stack.append((i + 1, left, k_all if nxt_same else 0))  # this member fills no slot (tried last)
+        useful = [k for k in np.flatnonzero((a[i] > 0) & (left > TOLERANCE)) if k >= low]
+        for k in sorted(useful, key=lambda c: (min(a[i, c], left[c]), -c)):
             nxt = left.copy()
             nxt[k] -= a[i, k]
-            stack.append((i + 1, nxt))  # the largest contribution is popped first
+            stack.append((i + 1, nxt, int(k)))  # the largest contribution (then the first trait) is popped first
     return False
 
 

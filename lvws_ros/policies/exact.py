@@ -191,12 +191,14 @@ def _travel_times(inst: Instance, state: State) -> np.ndarray:
     tr = inst.travel
     if tr is None or state.robot_site is None:
         return np.zeros(0)
-    starts = np.array(tr.task_from)
+    ends = np.array(tr.task_from)
+    if inst.objective == "return":  # and the ways home
+        ends = np.concatenate([ends, [tr.home(r) for r in range(inst.num_robots)]])
     origins = np.unique(np.concatenate([state.robot_site, tr.task_to]))
     speeds = np.unique([v for v in tr.robot_speed if v > 0])
     if not len(speeds):
         return np.zeros(0)
-    return (tr.distance[np.ix_(origins, np.unique(starts))][..., None] / speeds).reshape(-1)
+    return (tr.distance[np.ix_(origins, np.unique(ends))][..., None] / speeds).reshape(-1)
 
 
 def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon, start: dict[int, cp_model.IntVar],
@@ -313,8 +315,8 @@ def _horizon(inst: Instance, state: State, todo: list[int], hint: Schedule, coal
         if j in dur:
             tail[j] = dur[j] + max((tail[s] for s in inst.successors[j] if s in dur), default=0)
     lower = max([ticks(t0), *(head[j] + tail[j] for j in todo), *(ticks(e) for e in fixed_end.values())])
-    # travel rounded up to ticks adds less than a tick per move along any chain of tasks
-    slack = len(todo) + 1 if inst.travel is not None and not exact_scale else 0
+    # travel rounded up to ticks adds less than a tick per move along any chain of tasks (and the way home)
+    slack = len(todo) + 2 if inst.travel is not None and not exact_scale else 0
     upper = max(ticks(hint.makespan) + slack, lower)
     return _Horizon(todo, fixed_end, scale, exact_scale, dur, free_at, teams, head, tail, lower, upper)
 
@@ -669,11 +671,13 @@ def exact_match(
         for i, j in zip(*np.nonzero(~allowed), strict=True):
             model.add(a[i][j] == 0)
     z = [model.new_bool_var(f"z_{j}") for j in range(m)]
-    pay = np.round(robot_payload * 1000).astype(np.int64)
-    need = np.ceil(task_payload * 1000 - TOLERANCE).astype(np.int64)
+    pay, need = _units(np.asarray(robot_payload, dtype=np.float64), np.asarray(task_payload, dtype=np.float64))
     binary = np.all((robot_caps == 0) | (robot_caps == 1), axis=0)  # (K,): capabilities
-    amt = np.round(np.asarray(robot_caps, dtype=np.float64) * 1000).astype(np.int64)
-    want = np.ceil(np.asarray(task_caps, dtype=np.float64) * 1000 - TOLERANCE).astype(np.int64)
+    amt = np.zeros(np.shape(robot_caps), dtype=np.int64)
+    want = np.zeros(np.shape(task_caps), dtype=np.int64)
+    for col in range(int(np.shape(robot_caps)[1])):  # each trait in integers never accepting a subteam short of it
+        amt[:, col], want[:, col] = _units(np.asarray(robot_caps[:, col], dtype=np.float64),
+                                           np.asarray(task_caps[:, col], dtype=np.float64))
     for i in range(n):
         model.add_exactly_one(a[i])  # Eq. 9, with the idle column as "no task"
     for j in range(m):

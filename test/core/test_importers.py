@@ -3,6 +3,7 @@ robots and tasks become lvws-instance/1 files; errors name the file and the line
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -74,7 +75,7 @@ def test_without_roles_the_same_file_would_be_shorter(tmp_path):
     ("nActs = 2;\ndur = [1;", "expected ';'"),
     (MSPSP.replace("dur = [0,3,2,3,1,0];", "dur = [0,3,2,4,1];"), "dur has 5 entries, expected 6"),
     (MSPSP.replace("| 0,1,\n", "| 0,1,1,\n"), "sreq must be a 6 x 2 table"),
-    (MSPSP.replace("dur = [0,3,2,3,1,0];", "dur = [0,3,2,0,1,0];"), "activity 4 needs workers but lasts 0"),
+    (MSPSP.replace("| 1,1,\n", "| 0,0,\n"), "activity 3 lasts 2 but needs no worker"),
     (MSPSP.replace("succ = [2,3,4,5,6,6,6];", "succ = [2,3,4,5,6,6,9];"), "names an activity outside 1..6"),
     (MSPSP.replace("| 0,1,\n", "| 0,3,\n"), "can never be covered"),
 ])
@@ -86,11 +87,22 @@ def test_bad_mspsp_files_name_the_line_or_the_item(tmp_path, text, message):
     assert str(path) in str(info.value)
 
 
+def test_an_activity_without_duration_is_dropped_and_its_precedences_kept(tmp_path):
+    path = tmp_path / "zero.dzn"
+    path.write_text(MSPSP.replace("dur = [0,3,2,3,1,0];", "dur = [0,0,2,3,1,0];"))  # act2 (before act5) lasts 0
+    inst = import_mspsp(path)
+    assert [t.id for t in inst.tasks] == ["act3", "act4", "act5"]
+    assert inst.tasks[inst.task_index["act5"]].after == ()  # act2 came after the source only
+
+
 def test_the_datazinc_reader_takes_values_not_code():
     data = parse_dzn("a = 1; % note\nb = [| true, false | false, true |];\nc = {1, 2};\nd = [];", "x.dzn")
     assert data == {"a": 1, "b": [[True, False], [False, True]], "c": [1, 2], "d": []}
     with pytest.raises(InstanceError, match=r"x\.dzn line 1"):
         parse_dzn('a = "import os";', "x.dzn")
+    assert parse_dzn("trueRes = true;", "x.dzn") == {"trueRes": True}
+    with pytest.raises(InstanceError, match="nested deeper than 8 levels"):
+        parse_dzn("x = " + "[" * 5000 + "]" * 5000 + ";", "x.dzn")
 
 
 ROBOTS = "id,site,speed,home,welder,gripper,payload\nw1,dock,1.0,,1,,1\nw2,dock,1.0,,1,1,\narm,c,,,,2,2\n"
@@ -142,3 +154,21 @@ def test_lvws_import_writes_the_file_and_exits_2_on_bad_input(tmp_path):
                           "--out", str(tmp_path / "x.json")], capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "mastery must be a 4 x 2 table" in bad.stderr and "Traceback" not in bad.stderr
     assert not (tmp_path / "x.json").exists()
+
+
+def test_csv_from_a_spreadsheet_and_errors_on_the_robots_file_name_its_line(tmp_path):
+    (tmp_path / "robots.csv").write_bytes(b"\xef\xbb\xbf" + ROBOTS.encode())  # a byte-order mark
+    (tmp_path / "tasks.csv").write_text(TASKS)
+    (tmp_path / "sites.csv").write_text(SITES + "\n\n")  # blank lines at the end
+    inst = import_csv(tmp_path / "robots.csv", tmp_path / "tasks.csv", tmp_path / "sites.csv")
+    assert inst.num_robots == 3
+    for robots, message in ((ROBOTS + "w1,dock,1.0,,1,,1\n", "robots.csv line 5: id 'w1' already on line 2"),
+                            (ROBOTS.replace("arm,c,", "arm,moon,"), "robots.csv line 4: site: unknown site 'moon'"),
+                            (ROBOTS.replace("welder,", "duration,"), "robots.csv line 1: column(s) ['duration'] "
+                                                                     "are task fields")):
+        (tmp_path / "robots.csv").write_text(robots)
+        with pytest.raises(InstanceError, match=re.escape(message)):
+            import_csv(tmp_path / "robots.csv", tmp_path / "tasks.csv", tmp_path / "sites.csv")
+    (tmp_path / "robots.csv").write_text("id,welder,gripper,payload\nw1,1,,1\nw2,1,1,\narm,,2,2\n")
+    with pytest.raises(InstanceError, match=re.escape("tasks.csv line 2: site, from and to need the sites file")):
+        import_csv(tmp_path / "robots.csv", tmp_path / "tasks.csv")

@@ -330,3 +330,40 @@ def test_the_exact_expert_with_roles_equals_a_brute_force(seed):
     plain = instance_from_dict(data)  # no sites: the coalition model without travel
     assert solve_exact(plain, workers=2, time_limit=20).makespan == pytest.approx(res.makespan)
 
+
+
+def test_exact_matching_never_takes_a_subteam_short_of_a_fractional_trait():
+    """Amounts rounded to integers for CP-SAT round robots down and needs up: three robots
+    of 0.3335 never cover 1.0015 (they would at the nearest 1/1000), four do."""
+    from lvws_ros.policies.exact import exact_match
+
+    short = exact_match(np.array([[1.0, 0.0]] * 3), np.array([[0.3335]] * 3), np.zeros(3), np.array([[1.0015]]),
+                        np.zeros(1))
+    assert short.teams == {}
+    data = {"format": "lvws-instance/1", "name": "thin", "traits": ["a"],
+            "robots": [{"id": f"r{i}", "traits": {"a": 0.3335}} for i in range(4)],
+            "tasks": [{"id": "t0", "requires": {"a": 1.0015}, "duration": 1}]}
+    inst = instance_from_dict(data)
+    s = simulate(inst, make_policy("lvws", matching="exact")).schedule
+    assert check_schedule(inst, s) == [] and len(s.assignments[0].robots) == 4
+
+
+def test_the_exact_expert_counts_a_way_home_off_the_time_grid():
+    """A home that is no task's site, at an irrational distance: the way home is in the
+    model's time scale and slack (it once made the model infeasible)."""
+    data = {"format": "lvws-instance/1", "name": "home", "traits": ["a"], "objective": "return",
+            "sites": {"s0": [0, 0], "h": [1, 1]},
+            "robots": [{"id": "r0", "traits": {"a": 1}, "site": "s0", "speed": 1, "home": "h"}],
+            "tasks": [{"id": "t0", "requires": {"a": 1}, "duration": 1, "site": "s0"}]}
+    inst = instance_from_dict(data)
+    res = solve_exact(inst, workers=2, time_limit=10)
+    assert res.makespan == pytest.approx(1 + 2 ** 0.5) and check_schedule(inst, res.schedule) == []
+
+
+def test_roles_on_many_identical_members_are_decided_either_way():
+    same = np.ones((40, 5))
+    assert not role_cover(same, np.array([9.0, 8, 8, 8, 8]))  # 41 slots, 40 members
+    assert role_cover(same, np.array([8.0, 8, 8, 8, 8]))
+    mixed = np.vstack([np.ones((20, 5)), np.eye(5).repeat(4, axis=0) * 2])
+    assert role_cover(mixed, np.array([12.0, 12, 12, 12, 12]))
+    assert not role_cover(mixed, np.array([13.0, 12, 12, 12, 12]))
