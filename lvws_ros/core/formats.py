@@ -320,28 +320,11 @@ def instance_to_dict(inst: Instance) -> dict[str, Any]:
         out["objective"] = inst.objective
     if inst.roles:
         out["roles"] = True
-    out["robots"] = []
-    for r in inst.robots:
-        robot: dict[str, Any] = {"id": r.id}
-        if not traits_only:
-            robot["capabilities"] = list(r.capabilities)
-        if not traits_only or r.payload:
-            robot["payload"] = float(r.payload)
-        if r.traits:
-            robot["traits"] = {name: amount for name, amount in r.traits}
-        out["robots"].append({**robot, **r.extra})
-    out["tasks"] = []
-    for t in inst.tasks:
-        task: dict[str, Any] = {"id": t.id}
-        if not traits_only:
-            task["capabilities"] = list(t.capabilities)
-        if not traits_only or t.payload:
-            task["payload"] = float(t.payload)
-        if t.requires:
-            task["requires"] = {name: amount for name, amount in t.requires}
-        if t.roles is not None:
-            task["roles"] = t.roles
-        out["tasks"].append({**task, "duration": float(t.duration), "after": list(t.after), **t.extra})
+    out["robots"] = [{**_needs(r.id, r.capabilities, r.payload, "traits", r.traits, traits_only), **r.extra}
+                     for r in inst.robots]
+    out["tasks"] = [{**_needs(t.id, t.capabilities, t.payload, "requires", t.requires, traits_only),
+                     **({} if t.roles is None else {"roles": t.roles}),
+                     "duration": float(t.duration), "after": list(t.after), **t.extra} for t in inst.tasks]
     tr = inst.travel
     if tr is not None:
         out["sites"] = {s: list(xy) for s, xy in zip(tr.sites, tr.coordinates, strict=True)}
@@ -358,6 +341,20 @@ def instance_to_dict(inst: Instance) -> dict[str, Any]:
         for k, t in enumerate(out["tasks"]):
             a, b = tr.sites[tr.task_from[k]], tr.sites[tr.task_to[k]]
             t.update({"site": a} if a == b else {"from": a, "to": b})
+    return out
+
+
+def _needs(item: str, caps: tuple[int, ...], payload: float, key: str, amounts: tuple[tuple[str, float], ...],
+           traits_only: bool) -> dict[str, Any]:
+    """A robot's or task's id, capabilities, payload and trait amounts (under ``key``) as
+    written: without capabilities, and without a payload of 0, in a file of traits alone."""
+    out: dict[str, Any] = {"id": item}
+    if not traits_only:
+        out["capabilities"] = list(caps)
+    if not traits_only or payload:
+        out["payload"] = float(payload)
+    if amounts:
+        out[key] = dict(amounts)
     return out
 
 
