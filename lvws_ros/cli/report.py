@@ -24,8 +24,10 @@ from lvws_ros.core.online import (
     TeamSnapshot,
     build_instance,
     build_state,
+    roles_of,
     scheduling_view,
     still_pending,
+    trait_pairs,
 )
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule, Violation, check_schedule
@@ -79,11 +81,8 @@ def executed(teams: Sequence[TeamSnapshot], graph: GraphSnapshot, name: str = "r
     any of ``teams`` had (a robot that failed for good still did its earlier work)."""
     latest = {r.id: r for team in teams for r in team.robots}
     traits = tuple(graph.trait_names)
-
-    def pairs(amounts: Sequence[float]) -> tuple[tuple[str, float], ...]:
-        return tuple((c, float(a)) for c, a in zip(traits, amounts, strict=False) if a > 0)
-
-    robots = tuple(Robot(r.id, tuple(r.capabilities), r.payload, traits=pairs(r.traits)) for r in latest.values())
+    robots = tuple(Robot(r.id, tuple(r.capabilities), r.payload, traits=trait_pairs(traits, r.traits))
+                   for r in latest.values())
     tasks, out = [], []
     for t in graph.tasks:
         duration = t.duration
@@ -91,7 +90,7 @@ def executed(teams: Sequence[TeamSnapshot], graph: GraphSnapshot, name: str = "r
             duration = t.end - t.start
             out.append(Assignment(t.id, tuple(t.assigned_robots), t.start, t.end))
         tasks.append(Task(t.id, tuple(t.capabilities), t.payload, max(duration, 1e-9), tuple(t.prerequisites),
-                          requires=pairs(t.requires), roles=None if t.roles == 0 else t.roles == 2))
+                          requires=trait_pairs(traits, t.requires), roles=roles_of(t.roles)))
     inst = Instance(name, tuple(graph.capability_names), robots, tuple(tasks), traits=traits,
                     roles=bool(graph.roles))
     return inst, Schedule.from_assignments(name, "", out)

@@ -259,8 +259,8 @@ def depot_instance(rng: np.random.Generator, name: str, num_robots: int | None =
     return Instance(name, inst.capabilities, inst.robots, inst.tasks, travel=travel)
 
 
-def _draw_amounts(rng: np.random.Generator, count: int, most: int, high: int) -> np.ndarray:
-    """``count`` whole amounts in 1..``high``, small ones likelier, on 1..``most`` columns."""
+def _draw_amounts(rng: np.random.Generator, count: int, high: int) -> np.ndarray:
+    """``count`` whole amounts in 1..``high``, small ones likelier."""
     p = 1.0 / np.arange(1, high + 1)
     return rng.choice(np.arange(1, high + 1), size=count, p=p / p.sum()).astype(float)
 
@@ -276,9 +276,9 @@ def trait_instance(rng: np.random.Generator, name: str, num_robots: int | None =
     amounts = np.zeros((n, len(names)))
     for i in range(n):
         cols = rng.choice(len(names), size=min(len(names), int(rng.integers(1, per_robot + 1))), replace=False)
-        amounts[i, cols] = _draw_amounts(rng, len(cols), len(cols), 5)
+        amounts[i, cols] = _draw_amounts(rng, len(cols), 5)
     for c in np.flatnonzero(~(amounts > 0).any(axis=0)):  # every trait held by someone
-        amounts[rng.integers(n), c] = _draw_amounts(rng, 1, 1, 5)[0]
+        amounts[rng.integers(n), c] = _draw_amounts(rng, 1, 5)[0]
     if held_out:
         names.append("payload")
         amounts = np.hstack([amounts, rng.uniform(0.5, 5.0, size=(n, 1)).round(1)])
@@ -292,7 +292,7 @@ def trait_instance(rng: np.random.Generator, name: str, num_robots: int | None =
             need = np.zeros(len(names))
             skills = len(names) - 1 if held_out else len(names)
             cols = rng.choice(skills, size=min(skills, int(rng.integers(1, 4))), replace=False)
-            need[cols] = _draw_amounts(rng, len(cols), len(cols), 5)
+            need[cols] = _draw_amounts(rng, len(cols), 5)
             if held_out and rng.random() < 0.5:
                 need[-1] = round(float(rng.lognormal(np.log(3.0), 0.6)), 1)
             if covers(amounts, zero, need, 0.0, roles):

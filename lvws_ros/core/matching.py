@@ -106,6 +106,8 @@ def greedy_match(
     missing_payload = task_payload.astype(np.float64).copy()
     member = np.zeros((n, m), dtype=bool)
     closed_teams: dict[int, tuple[int, ...]] = {}
+    with_roles = np.zeros(m, dtype=bool) if roles is None else np.asarray(roles, dtype=bool)
+    role_helpers = helps(amounts, task_caps[with_roles], task_payload[with_roles])  # any holder of a needed trait
     while True:
         # A task is completable when its missing capabilities and payload can still come
         # from free robots. A partial subteam that cannot be completed releases its robots
@@ -118,7 +120,7 @@ def greedy_match(
             free_caps = can.T @ amounts  # (m, K)
             free_payload = can.T @ robot_payload.astype(np.float64)  # (m,)
         completable = covered(free_caps, free_payload, missing_caps, missing_payload)
-        for q in np.flatnonzero(open_task & (False if roles is None else roles)):
+        for q in np.flatnonzero(open_task & with_roles):
             pool = member[:, q] | (free if allowed is None else free & allowed[:, q])  # exactly, with roles
             completable[q] = covers(amounts[pool], robot_payload[pool], task_caps[q], task_payload[q], True)
         dead = np.flatnonzero(open_task & ~completable & member.any(axis=0))
@@ -131,8 +133,7 @@ def greedy_match(
         if not free.any():
             break
         useful = helps(amounts, missing_caps, missing_payload)
-        if roles is not None and roles.any():  # with roles any holder of a needed trait may help
-            useful[:, roles] = helps(amounts, task_caps[roles], task_payload[roles])
+        useful[:, with_roles] = role_helpers
         ok = free[:, None] & (open_task & completable)[None, :] & useful
         if allowed is not None:
             ok &= allowed
@@ -144,14 +145,13 @@ def greedy_match(
         member[i, j] = True
         missing_caps[j] -= amounts[i]
         missing_payload[j] -= robot_payload[i]
-        with_roles = roles is not None and bool(roles[j])
-        if with_roles:
+        if with_roles[j]:
             done = covers(amounts[member[:, j]], robot_payload[member[:, j]], task_caps[j], task_payload[j], True)
         else:
             done = bool(covered(np.zeros_like(missing_caps[j]), 0.0, missing_caps[j], missing_payload[j]))
         if done:
             team = _drop_redundant([int(x) for x in np.flatnonzero(member[:, j])], r[:, j], amounts,
-                                   robot_payload, task_caps[j], float(task_payload[j]), with_roles)
+                                   robot_payload, task_caps[j], float(task_payload[j]), bool(with_roles[j]))
             released = member[:, j].copy()
             released[team] = False
             free |= released  # redundant members go back to the pool

@@ -235,6 +235,22 @@ def _check_acyclic(structure: tuple[tuple[str, tuple[str, ...]], ...]) -> None:
         raise InstanceError(f"TaskGraph prerequisites: cycle {' -> '.join(exc.args[1])}") from None
 
 
+def trait_pairs(names: Sequence[str], amounts: Sequence[float]) -> tuple[tuple[str, float], ...]:
+    """A snapshot's amounts (in the order of its trait names) as an instance's (trait,
+    amount) pairs, the zeros left out."""
+    return tuple((c, float(a)) for c, a in zip(names, amounts, strict=False) if a > 0)
+
+
+def roles_of(code: int) -> bool | None:
+    """``Task.roles`` of a message (0 the graph's, 1 no, 2 yes) as an instance task's."""
+    return None if code == 0 else code == 2
+
+
+def roles_code(roles: bool | None) -> int:
+    """The inverse of :func:`roles_of`."""
+    return 0 if roles is None else 1 + int(roles)
+
+
 def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online") -> Instance:
     """The scheduling instance the snapshots describe (InstanceError on bad content)."""
     if tuple(team.capability_names) != tuple(graph.capability_names):
@@ -245,12 +261,11 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
                             f"{list(graph.trait_names)}")
     traits = tuple(graph.trait_names)
     robots = tuple(Robot(r.id, tuple(int(c) for c in r.capabilities), float(r.payload),
-                         traits=tuple((c, float(a)) for c, a in zip(traits, r.traits, strict=False) if a > 0))
+                         traits=trait_pairs(traits, r.traits))
                    for r in team.robots)
     tasks = tuple(Task(t.id, tuple(int(c) for c in t.capabilities), float(t.payload), float(t.duration),
                        tuple(t.prerequisites),
-                       requires=tuple((c, float(a)) for c, a in zip(traits, t.requires, strict=False) if a > 0),
-                       roles=None if t.roles == 0 else t.roles == 2)
+                       requires=trait_pairs(traits, t.requires), roles=roles_of(t.roles))
                   for t in graph.tasks)
     travel = snapshot_travel(team, graph) if graph.sites else None
     homes = [r.id for r in team.robots if r.home]
@@ -335,7 +350,7 @@ def schedulable(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[GraphSnapshot
     need = np.array(vectors[len(team.robots):], dtype=np.float64).reshape(-1, k)
     ok = covered(team_caps, team_payload, need, np.array([t.payload for t in graph.tasks], dtype=np.float64))
     for j, t in enumerate(graph.tasks):  # with roles, the rule itself
-        if ok[j] and (t.roles == 2 or (t.roles == 0 and graph.roles)):
+        if ok[j] and (graph.roles if roles_of(t.roles) is None else roles_of(t.roles)):
             rows = slice(None) if able is None else able[:, j] > 0
             ok[j] = covers(caps[rows], payloads[rows], need[j], t.payload, roles=True)
     if ok.all():

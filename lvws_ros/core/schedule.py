@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import TOLERANCE, role_cover, role_shortfall, shortfall
+from lvws_ros.core.subteams import TOLERANCE, role_shortfall, shortfall
 
 
 @dataclass(frozen=True)
@@ -171,11 +171,12 @@ def check_schedule(inst: Instance, s: Schedule, tol: float = TOLERANCE) -> list[
                                   f"< needed {inst.task_needs[j, k + c]:g}"))
         if short > 0:
             v.append(Violation(2, f"task {t.id!r}: subteam payload {carried:g} < needed {t.payload:g}"))
-        if inst.task_roles[j] and not missing.any() and not role_cover(inst.robot_amounts[members], inst.task_needs[j]):
+        if inst.task_roles[j] and not missing.any():  # the sums are there; with one trait per member?
             lack = role_shortfall(inst.robot_amounts[members], inst.task_needs[j])
-            names = [inst.cover_names[c] for c in np.flatnonzero(lack)]
-            v.append(Violation(2, f"task {t.id!r}: with roles (each member counts toward one trait) subteam "
-                                  f"{list(a.robots)} falls short of {names}"))
+            if lack.any():
+                names = [inst.cover_names[c] for c in np.flatnonzero(lack)]
+                v.append(Violation(2, f"task {t.id!r}: with roles (each member counts toward one trait) subteam "
+                                      f"{list(a.robots)} falls short of {names}"))
         # Rule 3: duration and start. Every comparison is written "violated unless it holds",
         # so that NaN (for which every comparison is False) is a violation, never a pass.
         if not (math.isfinite(a.start) and math.isfinite(a.end)):

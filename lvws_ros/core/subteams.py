@@ -37,6 +37,7 @@ __all__ = [
     "FloatArray",
     "covered",
     "covers",
+    "covers_alone",
     "earliest_cover",
     "fewest_carriers",
     "helps",
@@ -95,6 +96,15 @@ def covers(caps: npt.ArrayLike, payloads: FloatArray, need_caps: npt.ArrayLike, 
     if not covered(caps.sum(axis=0), payloads.sum(), need_caps, need_payload):
         return False
     return not roles or role_cover(caps, need_caps)
+
+
+def covers_alone(caps: npt.ArrayLike, payloads: npt.ArrayLike, need_caps: npt.ArrayLike, need_payload: npt.ArrayLike,
+                 roles: npt.ArrayLike = False) -> BoolArray:
+    """The rule for one robot alone, broadcast like :func:`covered` (a robot's amounts are
+    its sums): with ``roles`` a robot fills one trait, so it covers only a task needing at
+    most one."""
+    one_trait = (np.asarray(need_caps) > TOLERANCE).sum(axis=-1) <= 1
+    return np.asarray(covered(caps, payloads, need_caps, need_payload) & (~np.asarray(roles, dtype=bool) | one_trait))
 
 
 def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
@@ -252,7 +262,7 @@ def grow(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_p
         gain = np.where(used, -1.0, _gain(amounts, missing, need))
         best = float(gain.max())
         if best <= 0 and roles:  # what the members lack may come from a new assignment: every helper joins
-            team += [int(i) for i in np.flatnonzero(~used & ((amounts > 0) & (need > TOLERANCE)).any(axis=1))]
+            team += [int(i) for i in np.flatnonzero(~used & helps(amounts, need[None, :], np.zeros(1))[:, 0])]
             used[team] = True
             if lacking().any():
                 return None
@@ -297,8 +307,7 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
     if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload, roles):
         return None
     options: list[list[int]] = []
-    alone = [int(i) for i in np.flatnonzero(covered(caps, payloads, need_caps[None, :], need_payload))
-             if not roles or covers(caps[[i]], payloads[[i]], need_caps, need_payload, roles)]
+    alone = [int(i) for i in np.flatnonzero(covers_alone(caps, payloads, need_caps[None, :], need_payload, roles))]
     if alone and traits_from is None:
         options.append([min(alone, key=lambda i: (float(payloads[i]), i))])
     else:
@@ -341,9 +350,10 @@ def random_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray
     if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload, roles):
         return None
     order = rng.permutation(len(caps))
+    useful = helps(caps, need_caps[None, :], np.array([need_payload]))[:, 0]
     team: list[int] = []
     for i in order:
-        if ((caps[i] > 0) & (need_caps > TOLERANCE)).any() or need_payload > TOLERANCE:
+        if useful[i]:
             team.append(int(i))
             if covers(caps[team], payloads[team], need_caps, need_payload, roles):
                 break
@@ -357,7 +367,7 @@ def cover_with(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, 
     """An inclusion-minimal covering subteam that includes ``member``, found
     constructively (grown from it, trimmed without it), or None when none is found:
     whether ``member`` could start the task now with other robots. O(n t K)."""
-    if not ((caps[member] > 0) & (need_caps > TOLERANCE)).any() and need_payload <= TOLERANCE:
+    if not helps(caps[[member]], need_caps[None, :], np.array([need_payload]))[0, 0]:
         return None
     team = grow(caps, payloads, need_caps, need_payload, (member,), roles=roles)
     if team is None:

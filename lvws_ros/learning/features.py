@@ -58,7 +58,7 @@ import numpy.typing as npt
 
 from lvws_ros.core.executor import State, TaskStatus
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import TOLERANCE, covered, earliest_cover, fewest_carriers, helps
+from lvws_ros.core.subteams import TOLERANCE, covers_alone, earliest_cover, fewest_carriers, helps
 
 ROBOT_FEATURES = 7
 TASK_FEATURES = 17
@@ -112,10 +112,8 @@ class InstanceFeatures:
         robot_rarity = np.where(rs, holders[None, :], 1.0).min(axis=1, initial=1.0)
         ra, tn = inst.robot_amounts, inst.task_needs
         help_ij = helps(ra, tn, inst.task_payload) if m else np.zeros((n, 0), bool)  # (N, M)
-        alone = covered(ra[:, None, :], inst.robot_payload[:, None], tn[None, :, :],
-                        inst.task_payload[None, :]) if m else np.zeros((n, 0), bool)
-        # with roles a robot alone fills one trait: it covers only tasks that need one
-        alone &= ~(inst.task_roles & ((tn > TOLERANCE).sum(axis=1) > 1))[None, :]
+        alone = covers_alone(ra[:, None, :], inst.robot_payload[:, None], tn[None, :, :], inst.task_payload[None, :],
+                             inst.task_roles[None, :]) if m else np.zeros((n, 0), bool)
         self.robots = np.zeros((n, ROBOT_FEATURES), np.float32)
         self.robots[:, 2] = inst.robot_payload / self.payload_unit
         self.robots[:, 3] = rs.sum(axis=1) / k

@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 from lvws_ros.core.executor import Decision, State
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import AmountArray, FloatArray, covered, covers, lightest_cover, random_cover
+from lvws_ros.core.subteams import AmountArray, FloatArray, covered, covers_alone, lightest_cover, random_cover
 
 
 class _SequentialPolicy:
@@ -117,10 +117,7 @@ class RandomPolicy(_SequentialPolicy):
 
     def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
              need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
-        alone = np.flatnonzero(covered(caps, payloads, need_caps[None, :], need_payload))
-        if roles:
-            alone = np.array([i for i in alone if covers(caps[[i]], payloads[[i]], need_caps, need_payload, roles)],
-                             dtype=np.int64)
+        alone = np.flatnonzero(covers_alone(caps, payloads, need_caps[None, :], need_payload, roles))
         if len(alone):
             return (int(alone[int(self.rng.integers(len(alone)))]),)
         return random_cover(caps, payloads, need_caps, need_payload, self.rng, roles)

@@ -20,7 +20,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lvws_ros.core.executor import Policy, TaskStatus, simulate
-from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot, graph_sites
+from lvws_ros.core.online import (
+    GraphSnapshot,
+    OnlineScheduler,
+    RobotInfo,
+    TaskInfo,
+    TeamSnapshot,
+    graph_sites,
+    roles_code,
+)
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.errors import ConfigError, PolicyError
@@ -135,7 +143,7 @@ class _World:
                                   float(self.start[j]) if started else None,
                                   float(self.start[j] + self.actual[j]) if self.status[j] == TaskStatus.DONE
                                   else None, *sites, tuple(float(a) for a in inst.task_needs[j, k:]),
-                                  0 if t.roles is None else 1 + int(t.roles)))
+                                  roles_code(t.roles)))
         where = ((), ()) if tr is None else graph_sites(tr)
         return GraphSnapshot(self.time, inst.capabilities, tuple(tasks), *where, inst.traits, inst.roles,
                              inst.objective)

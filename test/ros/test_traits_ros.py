@@ -12,7 +12,15 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.formats import load_instance
-from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot, build_instance, graph_sites
+from lvws_ros.core.online import (
+    GraphSnapshot,
+    RobotInfo,
+    TaskInfo,
+    TeamSnapshot,
+    build_instance,
+    graph_sites,
+    roles_code,
+)
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.core.subteams import covers
 from lvws_ros.ros.convert import graph_from_msg, graph_to_msg, team_from_msg, team_to_msg
@@ -33,7 +41,7 @@ def snapshots(path: Path) -> tuple[TeamSnapshot, GraphSnapshot]:
                    for i, r in enumerate(inst.robots))
     tasks = tuple(TaskInfo(t.id, int(TaskStatus.QUEUED if t.after else TaskStatus.READY), t.capabilities, t.payload,
                            t.duration, t.after, (), None, None, tr.sites[tr.task_from[j]], tr.sites[tr.task_to[j]],
-                           tuple(inst.task_needs[j, len(inst.capabilities):]), 0 if t.roles is None else 1 + t.roles)
+                           tuple(inst.task_needs[j, len(inst.capabilities):]), roles_code(t.roles))
                   for j, t in enumerate(inst.tasks))
     return (TeamSnapshot(0.0, inst.capabilities, robots, inst.traits),
             GraphSnapshot(0.0, inst.capabilities, tasks, *graph_sites(tr), inst.traits, inst.roles, inst.objective))
