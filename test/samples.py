@@ -86,3 +86,26 @@ events:
       - {id: t15, type: transport, object: obj3, from: cell_3, to: cell_1, after: [t05]}
       - {id: t16, type: assembly, object: obj3, cell: cell_1, duration: 4.0, after: [t15]}
 """
+
+
+def trait_cell_config(tmp_path, edit=None):
+    """The case study cell with a trait: the husky brings battery 2, each jackal 1; every
+    transport requires battery 2 (the husky, or both jackals)."""
+    import yaml
+
+    from lvws_ros.ros.resources import case_study_config
+    from lvws_ros.sim.config import load_cell_config
+
+    data = yaml.safe_load(open(case_study_config()).read())
+    data["traits"] = ["battery"]
+    for r in data["robots"]:
+        if r["kind"] != "panda":
+            r["traits"] = {"battery": 2 if r["kind"] == "husky" else 1}
+    for t in data["tasks"]:
+        if t["type"] == "transport":
+            t["requires"] = {"battery": 2}  # the husky, or both jackals
+    if edit:
+        edit(data)
+    path = tmp_path / "cell.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return load_cell_config(path)

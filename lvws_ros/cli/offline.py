@@ -280,7 +280,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     unknown = [d for d in datasets if d not in trainable]
     if unknown:
         raise ConfigError(f"--datasets: {unknown} have no training split (choose from {', '.join(trainable)})")
-    families = tuple((k, args.family_count) for k in args.families.split(",") if k)
+    families = _families(args.families, args.family_count)
     bad = [k for k, _ in families if k not in TRAINING_FAMILIES]
     if bad:
         raise ConfigError(f"--families: {bad} are not training families (choose from {list(TRAINING_FAMILIES)})")
@@ -297,6 +297,19 @@ def cmd_train(args: argparse.Namespace) -> int:
     run_pipeline(cfg, args.out, cache_dir=args.cache_dir, resume=args.resume, init=init, own=own,
                  progress=not args.quiet)
     return 0
+
+
+def _families(text: str, count: int) -> tuple[tuple[str, int], ...]:
+    """``--families``: ``key`` (``--family-count`` instances) or ``key:count``, comma-separated."""
+    out = []
+    for item in (x.strip() for x in text.split(",")):
+        if not item:
+            continue
+        key, _, n = item.partition(":")
+        if n and not (n.isdigit() and int(n) > 0):
+            raise ConfigError(f"--families: {item!r}: the count after ':' must be a whole number > 0")
+        out.append((key, int(n) if n else count))
+    return tuple(out)
 
 
 def _improve(args: argparse.Namespace, cfg: Any, own: list[Instance], init: Path) -> int:
@@ -411,8 +424,9 @@ def _add_train(add: Adder) -> None:
                         f"--quiet and {', '.join(RECIPE_PASSED)} are taken from the command line")
     p.add_argument("--datasets", default="I,II", help="training splits to use, comma-separated ('' for none)")
     p.add_argument("--families", default="mixed",
-                   help=f"training families, comma-separated ('' for none; from {list(TRAINING_FAMILIES)})")
-    p.add_argument("--family-count", type=int, default=4000, help="instances per training family")
+                   help=f"training families, comma-separated, each KEY or KEY:COUNT ('' for none; from "
+                        f"{list(TRAINING_FAMILIES)})")
+    p.add_argument("--family-count", type=int, default=4000, help="instances per training family without a :COUNT")
     p.add_argument("--instances", nargs="*", default=None,
                    help="your own instance files or folders: labelled by the expert and trained on")
     p.add_argument("--init", default=None,

@@ -25,8 +25,8 @@ from lvws_ros.core.executor import Policy
 from lvws_ros.core.families import (
     FAMILIES,
     HELD_OUT_FAMILIES,
+    TABLE_TRAINING_FAMILIES,
     TEST_COUNT,
-    TRAINING_FAMILIES,
     TRAVEL_FAMILIES,
     family_test_split,
 )
@@ -180,7 +180,7 @@ def _table1(cols: dict[str, Column], policies: Sequence[str]) -> list[str]:
 
 
 def _family_table(cols: dict[str, Column], policies: Sequence[str]) -> list[str]:
-    keys = [*TRAINING_FAMILIES, *HELD_OUT_FAMILIES]
+    keys = [*TABLE_TRAINING_FAMILIES, *HELD_OUT_FAMILIES]
     lines = [
         "",
         "## Table I, other families — suboptimality (%) against the proven optimum",
@@ -278,7 +278,7 @@ def _waiting_section(cols: dict[str, Column], policies: Sequence[str], shares: d
 
 
 def _waiting_ablation(cols: dict[str, Column], meta: dict[str, Any]) -> list[str]:
-    keys = ["I", "II", *TRAINING_FAMILIES, *HELD_OUT_FAMILIES]
+    keys = ["I", "II", *TABLE_TRAINING_FAMILIES, *HELD_OUT_FAMILIES]
     rows = [("lvws", f"LVWS as shipped (idle bias {_bias(meta['lvws'].get('idle_bias', 0.0))}, "
                      f"wait threshold {_threshold(meta['lvws'].get('wait_threshold'))})"),
             ("lvws_no_head", "LVWS without its wait head (threshold off)"),
@@ -322,7 +322,7 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
         log(f"Table I, Dataset {key}: {len(insts)} test instances")
         cols[key] = run_column(insts, runners, cache_dir / f"expert-{key}-s{data_seed}.json", time_limit, workers,
                                progress)
-    for key in (*TRAINING_FAMILIES, *HELD_OUT_FAMILIES):
+    for key in (*TABLE_TRAINING_FAMILIES, *HELD_OUT_FAMILIES):
         insts = family_test_split(key, data_seed, min(limit or TEST_COUNT, TEST_COUNT))
         log(f"Family {key}: {len(insts)} test instances")
         cols[key] = run_column(insts, runners, cache_dir / f"expert-{key}-s{data_seed}.json", time_limit, workers,

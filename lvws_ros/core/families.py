@@ -31,7 +31,13 @@ and measured only there says little about a user's cell, so we draw from familie
   traits; 3..8 robots, each with 1..3 traits in whole amounts 1..5 (small ones likelier);
   6..18 tasks needing 1..3 traits in amounts 1..5 (about one in five needs 3 or more of
   one), 30 % of them with roles; integer durations 1..20; a DAG shape among
-  :data:`DAG_SHAPES`. Not yet in the training mixture.
+  :data:`DAG_SHAPES`.
+* ``traits-return`` — traits with travel and ``"objective": "return"`` (formats.md,
+  "Return to base"): a ``traits`` instance of 6..14 tasks on a floor of 4..7 stations at
+  float coordinates in 10 m x 5 m (straight-line distances rounded up to 0.5 m), every
+  robot mobile at one of the depot speeds, starting at a random station; half the robots
+  have their home at the first station (a dock), the others where they start; 20 % of the
+  tasks are transports.
 * ``traits-roles`` — held out, traits: roles on every task (the instance's ``roles``),
   specialists (each robot 1..2 of L = 3..8 traits), a summed ``payload`` trait in float
   kilograms beside them, in-trees or layers, log-normal float durations around 20 s.
@@ -76,6 +82,9 @@ FAMILIES = {
                     "distances, K 3-5 specialists, 5 speeds 0.4-1.25, 40 % fixed, 35 % transports", travel=True),
     "traits": Family("traits", 15, False, "additive traits: L 1-16, amounts 1-5, 30 % of tasks with roles",
                      traits=True),
+    "traits-return": Family("traits-return", 17, False, "additive traits with travel, homes and the objective "
+                            "'return': 4-7 stations in 10 m x 5 m, half the robots docked at one station",
+                            travel=True, traits=True),
     "traits-roles": Family("traits-roles", 16, True, "held out, traits: roles everywhere, specialists, a float "
                            "payload trait, in-trees or layers, float durations", traits=True),
 }
@@ -251,9 +260,8 @@ def depot_instance(rng: np.random.Generator, name: str, num_robots: int | None =
                 break
         sites.append((f"t{j}", stations[a], stations[b]))
     inst = _instance(name, k, caps, payload, task_caps, task_payload, durations, pre)
-    line = np.ceil(2 * np.sqrt(((xy[:, None, :] - xy[None, :, :]) ** 2).sum(axis=-1))) / 2  # up to 0.5 m
-    distances = {a: {b: float(line[i, j]) for j, b in enumerate(stations) if j != i} for i, a in enumerate(stations)}
-    travel = build_travel({s: [float(x), float(y)] for s, (x, y) in zip(stations, xy, strict=True)}, distances,
+    travel = build_travel({s: [float(x), float(y)] for s, (x, y) in zip(stations, xy, strict=True)},
+                          _straight_line(stations, xy),
                           [(f"r{i}", stations[int(robot_site[i])], None if fixed[i] else float(speed[i]))
                            for i in range(n)], sites)
     return Instance(name, inst.capabilities, inst.robots, inst.tasks, travel=travel)
@@ -308,6 +316,34 @@ def trait_instance(rng: np.random.Generator, name: str, num_robots: int | None =
     return Instance(name, (), robots, tuple(tasks), traits=tuple(names), roles=held_out)
 
 
+def trait_return_instance(rng: np.random.Generator, name: str, num_robots: int | None = None,
+                          num_tasks: int | None = None) -> Instance:
+    """One instance of the ``traits-return`` family (module docstring): every robot is
+    mobile, so every task stays coverable."""
+    inst = trait_instance(rng, name, num_robots, num_tasks or int(rng.integers(6, 15)))
+    n, m = inst.num_robots, inst.num_tasks
+    stations = [f"st{i}" for i in range(int(rng.integers(4, 8)))]
+    xy = rng.uniform((0.0, 0.0), (10.0, 5.0), size=(len(stations), 2)).round(1)
+    start = rng.integers(len(stations), size=n)
+    speed = rng.choice(DEPOT_SPEEDS, size=n)
+    docked = rng.random(n) < 0.5
+    sites = []
+    for j in range(m):
+        a, b = (int(x) for x in rng.choice(len(stations), size=2, replace=False))
+        sites.append((f"t{j}", stations[a], stations[b] if rng.random() < 0.2 else stations[a]))
+    travel = build_travel({s: [float(x), float(y)] for s, (x, y) in zip(stations, xy, strict=True)},
+                          _straight_line(stations, xy),
+                          [(f"r{i}", stations[int(start[i])], float(speed[i])) for i in range(n)], sites,
+                          [stations[0] if docked[i] else None for i in range(n)])
+    return replace(inst, travel=travel, objective="return")
+
+
+def _straight_line(stations: list[str], xy: np.ndarray) -> dict[str, dict[str, float]]:
+    """Distances between stations: the straight line rounded up to 0.5 m."""
+    line = np.ceil(2 * np.sqrt(((xy[:, None, :] - xy[None, :, :]) ** 2).sum(axis=-1))) / 2
+    return {a: {b: float(line[i, j]) for j, b in enumerate(stations) if j != i} for i, a in enumerate(stations)}
+
+
 def family_instance(key: str, index: int, seed: int, num_robots: int | None = None,
                     num_tasks: int | None = None) -> Instance:
     """Instance ``index`` of family ``key`` (``mixed`` draws its own sizes unless given)."""
@@ -319,6 +355,8 @@ def family_instance(key: str, index: int, seed: int, num_robots: int | None = No
         inst = assembly_instance(rng, "tmp", num_robots or 6, num_tasks or 18)
     elif key == "depot":
         inst = depot_instance(rng, "tmp", num_robots, num_tasks)
+    elif key == "traits-return":
+        inst = trait_return_instance(rng, "tmp", num_robots, num_tasks)
     elif fam.traits:
         inst = trait_instance(rng, "tmp", num_robots, num_tasks, held_out=fam.held_out)
     else:
@@ -326,10 +364,11 @@ def family_instance(key: str, index: int, seed: int, num_robots: int | None = No
     return replace(inst, name=f"{inst.num_robots}r-{inst.num_tasks}t-{key}-{index:05d}")
 
 
-TRAINING_FAMILIES = tuple(k for k, f in FAMILIES.items() if not f.held_out and not f.traits)
+TRAINING_FAMILIES = tuple(k for k, f in FAMILIES.items() if not f.held_out)
+TABLE_TRAINING_FAMILIES = tuple(k for k in TRAINING_FAMILIES if not FAMILIES[k].traits)  # Table I: the paper's model
 HELD_OUT_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out and not f.travel and not f.traits)  # Table I
 TRAIT_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.traits)
-TRAVEL_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out and f.travel)  # Table III
+TRAVEL_FAMILIES = tuple(k for k, f in FAMILIES.items() if f.held_out and f.travel and not f.traits)  # Table III
 TEST_OFFSET = 1_000_000  # test instances of a family: indices from here (training uses 0, 1, ...)
 TEST_COUNT = 100
 

@@ -69,6 +69,16 @@ class Travel:
         out[(speed <= 0) & moves[None, :]] = np.inf  # a fixed robot never takes a task that moves its team
         return np.asarray(out, dtype=np.float64)
 
+    def ways_home(self) -> FloatArray:
+        """(N, M): seconds robot i needs from where task j ends to its :meth:`home` (inf:
+        never, a fixed robot elsewhere)."""
+        homes = np.array([self.home(i) for i in range(len(self.robot_site))], dtype=np.int64)
+        ends = np.asarray(self.task_to, dtype=np.int64)
+        speed = np.asarray(self.robot_speed, dtype=np.float64)[:, None]
+        out = np.where(speed > 0, self.distance[np.ix_(ends, homes)].T / np.where(speed > 0, speed, 1.0), np.inf)
+        out[homes[:, None] == ends[None, :]] = 0.0
+        return np.asarray(out, dtype=np.float64)
+
     def key(self) -> tuple[object, ...]:
         return (self.sites, self.coordinates, self.overrides, self.robot_site, self.robot_speed, self.task_from,
                 self.task_to, self.robot_home)

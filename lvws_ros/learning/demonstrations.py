@@ -41,6 +41,7 @@ from lvws_ros.core.schedule import Schedule
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import ModelError
 from lvws_ros.learning.features import (
+    BUSY_PAIR_FEATURES,
     LEGACY_PAIR_FEATURES,
     PAIR_FEATURES,
     TRAVEL_PAIR_FEATURES,
@@ -265,18 +266,20 @@ def load_demos(path: str | Path) -> tuple[list[Demo], dict[str, Any]]:
 
 def _travel_columns(pairs: np.ndarray, path: Path) -> np.ndarray:
     """Pair features as this version has them. A file written before the travel features
-    (LEGACY_PAIR_FEATURES columns) or before the busy-robot ones (TRAVEL_PAIR_FEATURES)
-    gets the missing columns as zeros, which is what they are without travel; a state
-    with travel (a nonzero travel column) cannot be completed from its features, and
-    the file must be labelled again (ModelError)."""
+    (LEGACY_PAIR_FEATURES columns), before the busy-robot ones (TRAVEL_PAIR_FEATURES) or
+    before the way home (BUSY_PAIR_FEATURES) gets the missing columns as zeros, which is
+    what they are without travel (and, for the way home, in every instance such a file
+    can hold: the objective "return" came with that column); a state with travel (a
+    nonzero travel column) cannot be completed from the travel features alone, and the
+    file must be labelled again (ModelError)."""
     width = pairs.shape[-1] if pairs.ndim == 3 else -1
     if width == PAIR_FEATURES:
         return pairs
     if width == TRAVEL_PAIR_FEATURES and pairs[..., LEGACY_PAIR_FEATURES:].any():
         raise ModelError(f"{path}: travel states without the busy-robot pair features ({width} of {PAIR_FEATURES}): "
                          "written by an older version")
-    if width in (LEGACY_PAIR_FEATURES, TRAVEL_PAIR_FEATURES):
+    if width in (LEGACY_PAIR_FEATURES, TRAVEL_PAIR_FEATURES, BUSY_PAIR_FEATURES):
         pad = np.zeros((*pairs.shape[:-1], PAIR_FEATURES - width), pairs.dtype)
         return np.concatenate([pairs, pad], axis=-1)
-    raise ModelError(f"{path}: pairs of shape {pairs.shape}: expected {PAIR_FEATURES} (or {TRAVEL_PAIR_FEATURES}, "
-                     f"{LEGACY_PAIR_FEATURES}) pair features")
+    raise ModelError(f"{path}: pairs of shape {pairs.shape}: expected {PAIR_FEATURES} (or {BUSY_PAIR_FEATURES}, "
+                     f"{TRAVEL_PAIR_FEATURES}, {LEGACY_PAIR_FEATURES}) pair features")

@@ -37,11 +37,14 @@ setting out when its time left is over from where its task ends: how much later 
 arrives than the earliest a subteam covering j can be there (Eqs. 10-11), and (the same
 for the whole column) how much later that earliest subteam is with free robots only,
 both squashed the same way (0: nobody sooner). They tell the network when holding a
-task back for busy robots pays. A robot that is not available but has no time left
+task back for busy robots pays. And (model ``lvws-gatn/5``) with ``"objective":
+"return"`` (formats.md, "Return to base"): the time i needs from where j ends to its home,
+squashed the same way (0 without travel or without that objective): where a robot's last
+task is decides when it is home. A robot that is not available but has no time left
 (the online scheduler gives it BUSY_EPS, ``core/online.py``) counts as back in a
 moment. A ``lvws-gatn/2`` checkpoint reads the first LEGACY_PAIR_FEATURES only, a
 ``lvws-gatn/3`` one the first TRAVEL_PAIR_FEATURES (the busy-robot ones are then not
-computed).
+computed), a ``lvws-gatn/4`` one the first BUSY_PAIR_FEATURES.
 
 Cost per decision step: O(N K + T + E + R C K), and O(N C (K + log N)) more with travel
 for ``lvws-gatn/4``, with T the tasks not done, E their DAG edges, R the free robots and
@@ -62,11 +65,13 @@ from lvws_ros.core.subteams import TOLERANCE, covers_alone, earliest_cover, fewe
 
 ROBOT_FEATURES = 7
 TASK_FEATURES = 17
-PAIR_FEATURES = 9
+PAIR_FEATURES = 10
 LEGACY_PAIR_FEATURES = 5  # lvws-gatn/2: no travel features
 TRAVEL_PAIR_FEATURES = 7  # lvws-gatn/3: travel features of free robots only
+BUSY_PAIR_FEATURES = 9  # lvws-gatn/4: busy robots too, no way home
 MODEL_FORMATS = {LEGACY_PAIR_FEATURES: "lvws-gatn/2",  # the network's format by the pair features it reads
-                 TRAVEL_PAIR_FEATURES: "lvws-gatn/3", PAIR_FEATURES: "lvws-gatn/4"}
+                 TRAVEL_PAIR_FEATURES: "lvws-gatn/3", BUSY_PAIR_FEATURES: "lvws-gatn/4",
+                 PAIR_FEATURES: "lvws-gatn/5"}
 CAP_COUNT = 10.0  # "fewest robots" saturates here
 
 F32 = npt.NDArray[np.float32]
@@ -141,6 +146,8 @@ class InstanceFeatures:
         self.rc32 = rc.astype(np.float32)
         self.tc32 = tc.astype(np.float32)
         self.need = np.maximum(tc.sum(axis=1), 1).astype(np.float32)
+        returns = read > BUSY_PAIR_FEATURES and inst.objective == "return" and inst.travel is not None
+        self.home_after = inst.travel.ways_home() / self.time_unit if returns and inst.travel else None  # (N, M)
 
     def encode(self, state: State, rows: npt.ArrayLike | None = None) -> GraphFeatures:
         """Features of ``state``; ``rows`` (default: the free robots) choose the pair rows."""
@@ -202,6 +209,8 @@ class InstanceFeatures:
                     self.soonest(state, ready, np.where(free, 0.0, state.busy_remaining()))
                 out[:, :-1, 7] = _squash(_later(arrive, soon_any[None, :]))
                 out[:, :-1, 8] = _squash(_later(soon_free, soon_any))[None, :]
+        if self.home_after is not None:
+            out[:, :-1, 9] = _squash(self.home_after[np.ix_(rows, ready)])
         return out
 
     def soonest(self, state: State, ready: npt.NDArray[np.int64],

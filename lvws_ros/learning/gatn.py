@@ -64,7 +64,7 @@ class GATNConfig:
     mlp_hidden: int = 64
     use_transformer: bool = True
     wait_head: bool = False
-    pair_features: int = PAIR_FEATURES  # the first ones read: LEGACY_/TRAVEL_PAIR_FEATURES for lvws-gatn/2, /3
+    pair_features: int = PAIR_FEATURES  # the first ones read: LEGACY_/TRAVEL_/BUSY_PAIR_FEATURES for lvws-gatn/2-4
 
     def to_dict(self) -> dict[str, int | bool]:
         return asdict(self)

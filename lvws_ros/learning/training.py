@@ -243,8 +243,7 @@ def _cache_groups(cfg: PipelineConfig, train_set: Sequence[Instance]) -> list[tu
     groups = []
     for travel in (False, True):
         names = [k for k in cfg.datasets if DATASETS[k].travel == travel]
-        if not travel:
-            names += [f"{k}{n}" for k, n in cfg.families]
+        names += [f"{k}{n}" for k, n in cfg.families if FAMILIES[k].travel == travel]
         part = [inst for inst in train_set if (inst.travel is not None) == travel]
         if part:
             groups.append(("-".join(names), part))
@@ -353,7 +352,7 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
                                               dim=1)  # the new columns start at zero: the same outputs at first
             wider.load_state_dict(state)
             start = wider
-            log(f"{init}: reads {PAIR_FEATURES - old_w.shape[1]} more travel pair features from now on "
+            log(f"{init}: reads {PAIR_FEATURES - old_w.shape[1]} more pair features from now on "
                 f"({MODEL_FORMAT})")
         tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
         log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")

@@ -10,7 +10,9 @@ All are work-conserving: they start every ready task for which free robots suffi
 With travel (the travel extension of formats.md), a robot that can never reach a task (a
 fixed robot elsewhere) is never picked for it, and GRP takes the subteam that can be
 there first (the smallest arrival of its slowest member), the lightest among those;
-without travel every arrival is 0 and the choices are the paper's.
+without travel every arrival is 0 and the choices are the paper's. With ``"objective":
+"return"`` (formats.md), in the last wave of tasks GRP counts each robot's way home from
+where the task ends into its arrival: the subteam home soonest.
 Subteams are inclusion-minimal (a superset only ties up more robots, the duration
 being the same) and built constructively (:mod:`lvws_ros.core.subteams`), never by
 enumerating subsets: any team size, polynomial time.
@@ -21,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from lvws_ros.core.executor import Decision, State
+from lvws_ros.core.executor import Decision, State, TaskStatus
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import AmountArray, FloatArray, covered, covers_alone, lightest_cover, random_cover
 
@@ -47,8 +49,7 @@ class _SequentialPolicy:
              need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
         raise NotImplementedError
 
-    @staticmethod
-    def arrivals(state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
+    def arrivals(self, state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
         """Seconds each free robot needs to reach ``task`` (zeros without travel)."""
         return state.arrivals(free, [task])[:, 0]
 
@@ -92,6 +93,24 @@ class _SequentialPolicy:
 
 class GreedyPayloadPolicy(_SequentialPolicy):
     name = "grp"
+
+    def __init__(self, seed: int = 0) -> None:
+        super().__init__(seed)
+        self._ways_home: tuple[Instance | None, FloatArray | None] = (None, None)
+
+    def arrivals(self, state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
+        """Seconds each free robot needs to reach ``task``; with ``"objective": "return"``,
+        in the last wave (every task not started is ready, so a robot's task now may be
+        its last), plus its way home from where the task ends: the team home soonest."""
+        out = super().arrivals(state, free, task)
+        inst = state.instance
+        if inst.objective != "return" or inst.travel is None or (state.task_status == TaskStatus.QUEUED).any():
+            return out
+        if self._ways_home[0] is not inst:
+            self._ways_home = (inst, inst.travel.ways_home())
+        ways = self._ways_home[1]
+        assert ways is not None
+        return out + ways[free, task]
 
     def pick_reachable(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
                        arrival: FloatArray, roles: bool = False) -> tuple[int, ...] | None:

@@ -51,7 +51,7 @@ from lvws_ros.core.executor import (
     schedule_from_state,
     simulate,
 )
-from lvws_ros.core.matching import Match, check_shapes, greedy_match, match_reward
+from lvws_ros.core.matching import Match, check_shapes, match_reward
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import (
@@ -657,11 +657,13 @@ def exact_match(
     or payload. Without it, any robot may join a covered task when that pays more.
     ``allowed`` (n, m), as for the greedy matching, limits each task to the robots allowed
     for it (with travel: those that can reach it at all); None allows every pair.
-    The capability arrays may hold trait amounts (summed, :mod:`~lvws_ros.core.subteams`);
-    tasks with ``roles`` are not modelled here: they are left to the greedy matching.
+    The capability arrays may hold trait amounts (summed, :mod:`~lvws_ros.core.subteams`).
+    A task with ``roles`` (m,) gets a boolean per member and needed trait (the member
+    fills that slot; one slot per member, :func:`~lvws_ros.core.subteams.role_cover`'s
+    rule) and per-trait sums over the slots; with ``necessary_only`` each member fills a
+    slot that falls short without it, or the payload does (for the slots found: unlike
+    the sums' case, a smaller team whose members take other slots may exist).
     """
-    if roles is not None and roles.any():
-        return greedy_match(r, robot_caps, robot_payload, task_caps, task_payload, allowed, roles)
     n, m = check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
     if allowed is not None and allowed.shape != (n, m):
         raise ValueError(f"allowed has shape {allowed.shape}, expected ({n}, {m})")
@@ -683,6 +685,10 @@ def exact_match(
     for j in range(m):
         for i in range(n):
             model.add_implication(a[i][j], z[j])
+        if roles is not None and roles[j]:
+            _role_slots(model, [a[i][j] for i in range(n)], z[j], amt, want[j], pay, int(need[j]), necessary_only,
+                        f"{j}")
+            continue
         for k in np.flatnonzero(task_caps[j] > TOLERANCE):  # Eq. 10 (and additive traits)
             holders = [a[i][j] for i in range(n) if robot_caps[i, k] > 0]
             if not holders:
@@ -716,6 +722,38 @@ def exact_match(
                     teams[j] = (*teams[j], i)
     wait = tuple(waiting)
     return Match(teams, wait, match_reward(r, teams, wait))
+
+
+def _role_slots(model: cp_model.CpModel, member: list[cp_model.IntVar], covered: cp_model.IntVar,
+                amounts: npt.NDArray[np.int64], want: npt.NDArray[np.int64], pay: npt.NDArray[np.int64],
+                need: int, necessary_only: bool, tag: str) -> None:
+    """A task with roles: member i fills at most one needed trait's slot (and only if it
+    is a member); each needed trait's slot amounts add up when the task is ``covered``;
+    the payload adds up over all members. With ``necessary_only`` every member fills a
+    slot that falls short without it, or the payload falls short without it."""
+    cols = [int(k) for k in np.flatnonzero(want > 0)]
+    slot = {(i, k): model.new_bool_var(f"y_{i}_{k}_{tag}") for i in range(len(member)) for k in cols
+            if amounts[i, k] > 0}
+    for i, x in enumerate(member):
+        mine = [v for (i2, _), v in slot.items() if i2 == i]
+        if mine:
+            model.add(sum(mine) <= x)
+    sums = {k: sum(int(amounts[i, k]) * v for (i, k2), v in slot.items() if k2 == k) for k in cols}
+    for k in cols:
+        if not any(k2 == k for _, k2 in slot):
+            model.add(covered == 0)
+        else:
+            model.add(sums[k] >= int(want[k])).only_enforce_if(covered)
+    carried = sum(int(pay[i]) * x for i, x in enumerate(member))
+    model.add(carried >= need).only_enforce_if(covered)
+    if not necessary_only:
+        return
+    for (i, k), v in slot.items():  # a slot it fills falls short without it
+        model.add(sums[k] - int(amounts[i, k]) < int(want[k])).only_enforce_if(v)
+    for i, x in enumerate(member):
+        short = model.new_bool_var(f"short_{i}_{tag}")  # the payload would fall short without i
+        model.add(carried - int(pay[i]) < need).only_enforce_if(short)
+        model.add_bool_or([short, *(v for (i2, _), v in slot.items() if i2 == i)]).only_enforce_if(x)
 
 
 def _only_needed_members(model: cp_model.CpModel, member: list[cp_model.IntVar], carried: Any,

@@ -38,7 +38,7 @@ from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
 from lvws_ros.core.executor import TaskStatus
-from lvws_ros.errors import AssignmentRejected, LvwsError, WorldEventRejected
+from lvws_ros.errors import AssignmentRejected, ConfigError, LvwsError, WorldEventRejected
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main
 from lvws_ros.ros.resources import case_study_config
@@ -180,7 +180,11 @@ class CellSimNode(Node):
 
     # -- the world changes ------------------------------------------------------------------
     def on_submit(self, req: SubmitTasks.Request, res: SubmitTasks.Response) -> SubmitTasks.Response:
-        tasks = tuple(convert.cell_task_from_msg(t) for t in req.tasks)
+        try:
+            tasks = tuple(convert.cell_task_from_msg(t) for t in req.tasks)
+        except ConfigError as exc:
+            res.success, res.message = False, str(exc)
+            return res
         return self.answer(WorldEvent(self.sim.time, "submit", tasks=tasks), res)
 
     def on_cancel(self, req: CancelTask.Request, res: CancelTask.Response) -> CancelTask.Response:

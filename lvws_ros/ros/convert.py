@@ -132,10 +132,14 @@ def cell_task_to_msg(item: dict[str, Any], k: int = 0) -> CellTask:
     """A task entry of the cell config (``from``/``to`` or ``cell``) as a CellTask
     (ConfigError naming entry ``k``)."""
     try:
+        requires = item.get("requires") or {}
+        if not isinstance(requires, dict):
+            raise ConfigError(f"task {k}: requires must map trait names to amounts, got {requires!r}")
         return CellTask(id=str(item["id"]), type=str(item["type"]), object=str(item.get("object", "")),
                         source=str(item.get("from", "")), cell=str(item.get("to", item.get("cell", ""))),
                         duration=float(item.get("duration", 0.0)), payload=float(item.get("payload", PART_PAYLOAD)),
-                        after=[str(a) for a in item.get("after", [])])
+                        after=[str(a) for a in item.get("after", [])],
+                        require_names=[str(n) for n in requires], requires=[float(v) for v in requires.values()])
     except KeyError as exc:
         raise ConfigError(f"task {k}: missing key {exc}") from None
     except (TypeError, ValueError) as exc:
@@ -146,6 +150,11 @@ def cell_task_from_msg(msg: Any) -> dict[str, Any]:
     """A CellTask as a task entry of the cell config (the inverse of :func:`cell_task_to_msg`)."""
     entry: dict[str, Any] = {"id": msg.id, "type": msg.type, "object": msg.object, "duration": msg.duration,
                              "payload": msg.payload, "after": list(msg.after)}
+    names, amounts = list(msg.require_names), [float(v) for v in msg.requires]
+    if len(names) != len(amounts):
+        raise ConfigError(f"task {msg.id!r}: {len(names)} require_names but {len(amounts)} requires")
+    if names:
+        entry["requires"] = dict(zip(names, amounts, strict=True))
     if msg.type == "transport":
         entry.update({"from": msg.source, "to": msg.cell})
     else:

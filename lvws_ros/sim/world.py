@@ -370,6 +370,10 @@ class CellSim:
                 raise WorldEventRejected(str(exc)) from None
             if spec.id in known:
                 raise WorldEventRejected(f"task {spec.id}: the id is taken")
+            strange = [name for name, _ in spec.requires if name not in self.cfg.traits]
+            if strange:
+                raise WorldEventRejected(f"task {spec.id}: unknown trait {strange[0]!r} (the cell's traits: "
+                                         f"{list(self.cfg.traits)})")
             unknown = [a for a in spec.after if a not in known]
             if unknown:
                 raise WorldEventRejected(f"task {spec.id}: unknown prerequisite(s) {unknown}")

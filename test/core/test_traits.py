@@ -332,6 +332,42 @@ def test_the_exact_expert_with_roles_equals_a_brute_force(seed):
 
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10**6))
+def test_exact_matching_with_roles_equals_a_brute_force(seed):
+    """Eqs. 7-11 with roles (each member fills one trait slot) solved exactly equals the
+    best of every assignment of robots to tasks or idle that covers by the roles rule
+    (any member may join, as without ``necessary_only``); with it, every team still covers
+    and every member fills a slot or carries."""
+    from lvws_ros.policies.exact import exact_match
+
+    rng = np.random.default_rng(seed)
+    n, m, k = int(rng.integers(1, 5)), int(rng.integers(1, 3)), 3
+    amounts = rng.integers(0, 3, (n, k)).astype(float)
+    need = rng.integers(0, 3, (m, k)).astype(float)
+    need[~(need > 0).any(axis=1), 0] = 1.0
+    payload, need_payload = rng.integers(0, 3, n).astype(float), rng.integers(0, 3, m).astype(float)
+    roles = rng.random(m) < 0.7
+    r = rng.normal(size=(n, m + 1))
+    best = -np.inf
+    for choice in itertools.product(range(m + 1), repeat=n):
+        teams = [[i for i in range(n) if choice[i] == j] for j in range(m)]
+        if all(not t or covers(amounts[t], payload[t], need[j], need_payload[j], bool(roles[j]))
+               for j, t in enumerate(teams)):
+            best = max(best, float(sum(r[i, choice[i]] for i in range(n))))
+    free = exact_match(r, amounts, payload, need, need_payload, necessary_only=False, roles=roles, workers=1)
+    assert free.reward == pytest.approx(best, abs=1e-4)
+    tight = exact_match(r, amounts, payload, need, need_payload, roles=roles, workers=1)
+    assert tight.reward <= free.reward + 1e-4
+    for match in (free, tight):
+        for j, team in match.teams.items():
+            assert covers(amounts[list(team)], payload[list(team)], need[j], need_payload[j], bool(roles[j]))
+    for j, team in tight.teams.items():  # no member is along for the ride (it holds a needed trait or carries)
+        for i in team:
+            short = payload[list(team)].sum() - payload[i] < need_payload[j]
+            assert short or (amounts[i] > 0)[need[j] > 0].any(), (team, i)
+
+
 def test_exact_matching_never_takes_a_subteam_short_of_a_fractional_trait():
     """Amounts rounded to integers for CP-SAT round robots down and needs up: three robots
     of 0.3335 never cover 1.0015 (they would at the nearest 1/1000), four do."""
@@ -367,3 +403,10 @@ def test_roles_on_many_identical_members_are_decided_either_way():
     mixed = np.vstack([np.ones((20, 5)), np.eye(5).repeat(4, axis=0) * 2])
     assert role_cover(mixed, np.array([12.0, 12, 12, 12, 12]))
     assert not role_cover(mixed, np.array([13.0, 12, 12, 12, 12]))
+
+
+def test_lvws_with_the_exact_matching_is_valid_on_tasks_with_roles():
+    for index in range(3):
+        inst = family_instance("traits-roles", index, 0)
+        s = simulate(inst, make_policy("lvws", matching="exact")).schedule
+        assert check_schedule(inst, s) == [], inst.name

@@ -193,7 +193,7 @@ def test_fine_tuning_a_model_without_travel_features_teaches_it_to_read_them(tmp
                          processes=1, label_time_limit=2, train=TrainConfig(epochs=1, batch_size=16, seed=0))
     logs: list[str] = []
     model, _ = run_pipeline(cfg, tmp_path / "new.pt", init=tmp_path / "old.pt", progress=False, log=logs.append)
-    assert model.cfg.pair_features == PAIR_FEATURES and any("travel pair features" in line for line in logs)
+    assert model.cfg.pair_features == PAIR_FEATURES and any("more pair features" in line for line in logs)
     assert load_checkpoint(tmp_path / "new.pt")[0].cfg.pair_features == PAIR_FEATURES
 
 

@@ -96,3 +96,24 @@ def test_the_scheduler_node_schedules_a_cell_written_in_traits(ros_context):
         team_idx = [inst.robot_index[r] for r in a.robot_ids]
         assert covers(inst.robot_amounts[team_idx], inst.robot_payload[team_idx], inst.task_needs[j],
                       inst.tasks[j].payload, bool(inst.task_roles[j])), (a.task_id, list(a.robot_ids))
+
+
+def test_a_submitted_task_carries_its_traits_through_a_cell_task_message():
+    from lvws_msgs.msg import CellTask
+
+    from lvws_ros.errors import ConfigError
+    from lvws_ros.ros.convert import cell_task_from_msg, cell_task_to_msg
+
+    entry = {"id": "t20", "type": "transport", "object": "obj3", "from": "cell_1", "to": "cell_3", "after": ["t14"],
+             "requires": {"battery": 3.0, "gripper": 0.5}}
+    msg = deserialize_message(serialize_message(cell_task_to_msg(entry)), CellTask)
+    assert list(msg.require_names) == ["battery", "gripper"] and list(msg.requires) == [3.0, 0.5]
+    back = cell_task_from_msg(msg)
+    assert back["requires"] == entry["requires"] and back["from"] == "cell_1"
+    plain = cell_task_from_msg(cell_task_to_msg({k: v for k, v in entry.items() if k != "requires"}))
+    assert "requires" not in plain  # a task without traits is the entry it was
+    msg.requires = [3.0]
+    with pytest.raises(ConfigError, match="task 't20': 2 require_names but 1 requires"):
+        cell_task_from_msg(msg)
+    with pytest.raises(ConfigError, match="task 0: requires must map"):
+        cell_task_to_msg({**entry, "requires": [3]})

@@ -5,36 +5,18 @@ and a run schedules subteams that cover by the trait rule."""
 from __future__ import annotations
 
 import pytest
-import yaml
 
 from lvws_ros.core.schedule import check_schedule
-from lvws_ros.errors import ConfigError
+from lvws_ros.errors import ConfigError, WorldEventRejected
 from lvws_ros.registry import make_policy
-from lvws_ros.ros.resources import case_study_config
-from lvws_ros.sim.config import load_cell_config
 from lvws_ros.sim.runner import run_offline
 from lvws_ros.sim.world import CellSim
-
-
-def _config(tmp_path, edit=None):
-    data = yaml.safe_load(open(case_study_config()).read())
-    data["traits"] = ["battery"]
-    for r in data["robots"]:
-        if r["kind"] != "panda":
-            r["traits"] = {"battery": 2 if r["kind"] == "husky" else 1}
-    for t in data["tasks"]:
-        if t["type"] == "transport":
-            t["requires"] = {"battery": 2}  # the husky, or both jackals
-    if edit:
-        edit(data)
-    path = tmp_path / "cell.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return load_cell_config(path)
+from samples import trait_cell_config
 
 
 @pytest.mark.parametrize("policy", ["grp", "lvws"])
 def test_a_cell_with_traits_runs_and_every_transport_has_battery_two(tmp_path, policy):
-    cfg = _config(tmp_path)
+    cfg = trait_cell_config(tmp_path)
     sim = CellSim(cfg)
     assert sim.inst.traits == ("battery",)
     team, graph = sim.team_snapshot(), sim.graph_snapshot()
@@ -49,6 +31,18 @@ def test_a_cell_with_traits_runs_and_every_transport_has_battery_two(tmp_path, p
 
 def test_a_trait_the_cell_does_not_name_is_refused(tmp_path):
     with pytest.raises(Exception, match="unknown trait 'laser'"):
-        CellSim(_config(tmp_path, lambda d: d["tasks"][0].update(requires={"laser": 1})))
+        CellSim(trait_cell_config(tmp_path, lambda d: d["tasks"][0].update(requires={"laser": 1})))
     with pytest.raises(ConfigError, match="requires battery"):
-        _config(tmp_path, lambda d: d["tasks"][0].update(requires={"battery": "lots"}))
+        trait_cell_config(tmp_path, lambda d: d["tasks"][0].update(requires={"battery": "lots"}))
+
+
+def test_a_task_submitted_at_run_time_carries_its_traits(tmp_path):
+    sim = CellSim(trait_cell_config(tmp_path))
+    sim.submit([{"id": "t20", "type": "transport", "object": "obj3", "from": "cell_3", "to": "cell_1",
+                 "after": ["t14"], "requires": {"battery": 3}}])
+    inst = sim.inst
+    j = inst.task_index["t20"]
+    assert dict(inst.tasks[j].requires) == {"battery": 3.0}
+    with pytest.raises(WorldEventRejected, match="task t21: unknown trait 'laser'"):
+        sim.submit([{"id": "t21", "type": "assembly", "object": "obj1", "cell": "cell_3", "duration": 1.0,
+                     "after": ["t14"], "requires": {"laser": 1}}])
