@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lvws_ros.core.subteams import AmountArray, BoolArray, FloatArray, covered, covers, helps
+from lvws_ros.core.subteams import AmountArray, BoolArray, FloatArray, IntArray, covered, covers, helps
 from lvws_ros.errors import PolicyError
 
 
@@ -61,6 +61,36 @@ def _best_pick(r: FloatArray, ok: BoolArray, free: BoolArray) -> tuple[int, int]
     return i, j
 
 
+def _idle_first(r: FloatArray, rows: IntArray, ok: BoolArray, free_caps: FloatArray, free_payload: FloatArray,
+                missing_caps: FloatArray, missing_payload: FloatArray, amounts: FloatArray, payload: FloatArray,
+                reach: BoolArray, partial: BoolArray, with_roles: BoolArray) -> IntArray:
+    """The free robots (``rows``) the next picks send to the idle task, all at once: those
+    whose idle reward beats every open (robot, task) entry ``ok``, in the order single picks
+    take them (largest first, then lower index), up to and including the first whose
+    leaving makes a task with a partial subteam (``partial``) impossible to complete (its
+    release may bring back better entries). Their leaving only closes entries, so each
+    would be picked before any task. None at once while a partial subteam has roles (its
+    completion is not a sum)."""
+    m = r.shape[1] - 1
+    if (partial & with_roles).any():
+        return rows[:0]
+    best_task = float(np.max(np.where(ok, r[rows, :m], -np.inf), initial=-np.inf))
+    cand = rows[r[rows, m] > best_task]
+    if len(cand) < 2:
+        return cand
+    order = cand[np.lexsort((cand, -r[cand, m]))]
+    tasks = np.flatnonzero(partial)
+    if not len(tasks):
+        return order
+    share = reach[np.ix_(order, tasks)].astype(np.float64)  # (c, p): who counts for which partial task
+    gone_caps = np.cumsum(share[:, :, None] * amounts[order][:, None, :], axis=0)  # (c, p, K)
+    gone_payload = np.cumsum(share * payload[order][:, None], axis=0)  # (c, p)
+    still = covered(free_caps[tasks][None] - gone_caps, free_payload[tasks][None] - gone_payload,
+                    missing_caps[tasks][None], missing_payload[tasks][None])  # (c, p)
+    short = np.flatnonzero(~still.all(axis=1))
+    return order if not len(short) else order[: int(short[0]) + 1]
+
+
 def _drop_redundant(team: list[int], rewards: FloatArray, robot_caps: AmountArray, robot_payload: FloatArray,
                     need_caps: AmountArray, need_payload: float, roles: bool = False) -> list[int]:
     """Members made redundant by later ones leave, lowest reward first: the subteam still
@@ -88,7 +118,9 @@ def greedy_match(
     task). A robot picked for a task joins its partial subteam; the task closes once
     covered, minus members made redundant (subteams are inclusion-minimal). A partial
     subteam the free robots can no longer complete releases its robots. One vectorised
-    argmax over n x (m+1) per pick: O(n * m) per pick, O(n^2 m) worst case.
+    argmax over the free robots x (m+1) per pick; what the free robots can still bring to
+    each task, and who helps which task, are updated for the robot and the task a pick
+    changes, not recomputed: O(n * m) per pick, O(n^2 m) worst case.
 
     ``allowed`` (n, m), when given, limits each task to the robots allowed for it (with
     travel: the robots that can reach it at all); None allows every pair. ``roles`` (m,)
@@ -108,17 +140,25 @@ def greedy_match(
     closed_teams: dict[int, tuple[int, ...]] = {}
     with_roles = np.zeros(m, dtype=bool) if roles is None else np.asarray(roles, dtype=bool)
     role_helpers = helps(amounts, task_caps[with_roles], task_payload[with_roles])  # any holder of a needed trait
+    payload64 = robot_payload.astype(np.float64)
+    reach = np.ones((n, m), dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
+    # What the free robots allowed for each task bring to it (m, K) and (m,): updated as
+    # robots leave and rejoin the pool (whole amounts add up exactly; a tolerance covers the rest).
+    free_caps = reach.T.astype(np.float64) @ amounts
+    free_payload = reach.T.astype(np.float64) @ payload64
+    useful = helps(amounts, missing_caps, missing_payload)
+    useful[:, with_roles] = role_helpers
+
+    def shift(rows: IntArray, sign: float) -> None:  # robots leave (-1) or rejoin (+1) the free pool
+        if len(rows):
+            counts = sign * reach[rows].T.astype(np.float64)  # (m, len(rows))
+            free_caps[...] += counts @ amounts[rows]
+            free_payload[...] += counts @ payload64[rows]
+
     while True:
         # A task is completable when its missing capabilities and payload can still come
         # from free robots. A partial subteam that cannot be completed releases its robots
         # (one task at a time, since released robots may complete another).
-        if allowed is None:
-            free_caps = amounts[free].sum(axis=0)
-            free_payload: FloatArray | float = float(robot_payload[free].sum())
-        else:  # per task: the free robots allowed for it
-            can = (allowed & free[:, None]).astype(np.float64)  # (n, m)
-            free_caps = can.T @ amounts  # (m, K)
-            free_payload = can.T @ robot_payload.astype(np.float64)  # (m,)
         completable = covered(free_caps, free_payload, missing_caps, missing_payload)
         for q in np.flatnonzero(open_task & with_roles):
             pool = member[:, q] | (free if allowed is None else free & allowed[:, q])  # exactly, with roles
@@ -126,25 +166,34 @@ def greedy_match(
         dead = np.flatnonzero(open_task & ~completable & member.any(axis=0))
         if len(dead):
             j = int(dead[0])
+            shift(np.flatnonzero(member[:, j]), 1.0)
             free |= member[:, j]
             member[:, j] = False
             open_task[j] = False
             continue
-        if not free.any():
+        rows = np.flatnonzero(free)
+        if not len(rows):
             break
-        useful = helps(amounts, missing_caps, missing_payload)
-        useful[:, with_roles] = role_helpers
-        ok = free[:, None] & (open_task & completable)[None, :] & useful
-        if allowed is not None:
-            ok &= allowed
-        i, j = _best_pick(r, ok, free)
+        ok = (open_task & completable)[None, :] & useful[rows] & reach[rows]
+        idle = _idle_first(r, rows, ok, free_caps, free_payload, missing_caps, missing_payload, amounts, payload64,
+                           reach, open_task & member.any(axis=0), with_roles)
+        if len(idle) > 1:  # the picks one by one would send these to the idle task, in this order
+            free[idle] = False
+            waiting[idle] = True
+            shift(idle, -1.0)
+            continue
+        k, j = _best_pick(r[rows], ok, np.ones(len(rows), dtype=bool))
+        i = int(rows[k])
         free[i] = False
+        shift(np.array([i]), -1.0)
         if j == m:
             waiting[i] = True
             continue
         member[i, j] = True
         missing_caps[j] -= amounts[i]
         missing_payload[j] -= robot_payload[i]
+        if not with_roles[j]:
+            useful[:, j] = helps(amounts, missing_caps[j][None, :], missing_payload[j:j + 1])[:, 0]
         if with_roles[j]:
             done = covers(amounts[member[:, j]], robot_payload[member[:, j]], task_caps[j], task_payload[j], True)
         else:
@@ -154,6 +203,7 @@ def greedy_match(
                                    robot_payload, task_caps[j], float(task_payload[j]), bool(with_roles[j]))
             released = member[:, j].copy()
             released[team] = False
+            shift(np.flatnonzero(released), 1.0)
             free |= released  # redundant members go back to the pool
             member[:, j] = False
             member[team, j] = True

@@ -18,14 +18,18 @@ plan to follow, ``auto``
 
 While it follows a plan not proven optimal, each later step spends its budget on the
 same improvement from its own state, replacing the plan only by a shorter one: a plan
-never gets worse. With a budget of 0 it decides as its quick plan does; when not even a
-quick plan finishes within the budget (fleet scale), it takes GRP's decision for the
-step and counts it in ``fallbacks``, and takes GRP's decisions at once (no quick plan
-tried) until half as many tasks are left, when it tries again: at fleet scale a run
-costs GRP's time and a few budgets, and is never longer than GRP's schedule (a quick plan
-found later holds GRP's own finish). With a budget of 0 the quick plans are made however
-long they take, and nothing more. Each step's compute stays within the budget plus
-at most one decision of LVWS or GRP and CP-SAT's overshoot of its time limit.
+never gets worse. After SEARCH_PATIENCE searches in a row that did not shorten the plan,
+it follows the plan without searching for 1, then 2, 4, ... steps between searches
+(until a search shortens it, or the plan is made afresh): a run of thousands of decision
+steps (fleet scale with travel) costs a few dozen budgets, not one per step. With a
+budget of 0 it decides as its quick plan does; when not even a quick plan finishes
+within the budget (fleet scale), it takes GRP's decision for the step and counts it in
+``fallbacks``, and takes GRP's decisions at once (no quick plan tried) until half as
+many tasks are left, when it tries again: at fleet scale a run costs GRP's time and a
+few budgets, and is never longer than GRP's schedule (a quick plan found later holds
+GRP's own finish). With a budget of 0 the quick plans are made however long they take,
+and nothing more. Each step's compute stays within the budget plus at most one decision
+of LVWS or GRP and CP-SAT's overshoot of its time limit.
 """
 
 from __future__ import annotations
@@ -60,8 +64,9 @@ DEFAULT_BUDGET_MS = 1000.0
 EXACT_TASKS = 60  # CP-SAT improves plans of cells with at most this many tasks still to do
 EXACT_SHARE = 0.6  # of the time left that CP-SAT may take (the rest: sampling)
 FOLLOW_SECONDS_PER_TASK = 0.003  # first guess of the time to turn an LNS schedule into steps, per task to do
+SEARCH_PATIENCE = 8  # searches in a row without a shorter plan before steps between searches are skipped
 
-__all__ = ["DEFAULT_BUDGET_MS", "EXACT_TASKS", "AutoPolicy"]
+__all__ = ["DEFAULT_BUDGET_MS", "EXACT_TASKS", "SEARCH_PATIENCE", "AutoPolicy"]
 
 
 def _to_do(state: State) -> int:
@@ -93,6 +98,9 @@ class AutoPolicy:
         self.lns_windows = 0  # neighbourhoods the large-neighbourhood search solved
         self.sampling_fits = True  # LVWS's quick plan finished within the budget (else neither would a sample)
         self._schedule: Schedule | None = None  # the plan's whole schedule (CP-SAT's warm start)
+        self.unimproved = 0  # searches in a row that did not shorten the plan
+        self.skip = 0  # steps left to follow the plan without searching
+        self.skipped = 0  # steps followed without a search (after SEARCH_PATIENCE unimproved ones)
 
     def reset(self, instance: Instance) -> None:
         self.sampler.reset(instance)
@@ -107,6 +115,7 @@ class AutoPolicy:
         self.unplannable = math.inf
         self.sampling_fits = True
         self.lns_windows = 0
+        self.unimproved = self.skip = self.skipped = 0
 
     @property
     def planned_makespan(self) -> float:
@@ -193,9 +202,14 @@ class AutoPolicy:
         following = self.plan.follows(state, self.name)
         if following and self.proven:
             return self.plan.pop()
+        if following and self.skip > 0:  # the search has not paid lately: follow without one
+            self.skip -= 1
+            self.skipped += 1
+            return self.plan.pop()
         if not following:
             self.plan.clear()
             self.proven = False
+            self.unimproved = self.skip = 0
             todo = _to_do(state)
             if todo > self.unplannable:  # no quick plan fitted the budget at this size: GRP's step at once
                 self.fallbacks += 1
@@ -210,6 +224,7 @@ class AutoPolicy:
             self.quick_makespan = self.plan.makespan if self.plan.steps else math.nan
             if not self.plan.steps:
                 self.unplannable = todo // 2  # try again when half as many tasks are left
+        before = self.plan.makespan if self.plan.steps else math.inf
         if time.perf_counter() < deadline:
             self._exact(state, deadline)
         one = math.inf  # seconds per sampled schedule in the latest round: rounds sized to the time left
@@ -227,4 +242,8 @@ class AutoPolicy:
         if not self.plan.steps:
             self.fallbacks += 1
             return self.grp.decide(state)
+        if following:  # a search on a plan it already had: did it pay?
+            self.unimproved = 0 if self.plan.makespan < before - TOLERANCE else self.unimproved + 1
+            if self.unimproved >= SEARCH_PATIENCE:
+                self.skip = 2 ** (self.unimproved - SEARCH_PATIENCE)
         return self.plan.pop()

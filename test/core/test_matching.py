@@ -100,3 +100,74 @@ def test_exact_matching_keeps_to_the_allowed_pairs_and_is_never_worse_than_greed
         assert_valid(e, *case)
         assert all(allowed[i, j] for j, team in e.teams.items() for i in team)
         assert e.reward >= g.reward - 1e-5
+
+
+def _one_pick_at_a_time(r, caps, payload, need, need_payload, allowed, roles):
+    """The greedy of Eqs. 7-11 as written: every pick one global argmax, everything the
+    free robots bring recomputed from scratch (the reference the fast form must equal)."""
+    from lvws_ros.core.subteams import covered, helps
+
+    n, m = r.shape[0], r.shape[1] - 1
+    allowed = np.ones((n, m), bool) if allowed is None else allowed
+    free, waiting, open_task = np.ones(n, bool), np.zeros(n, bool), np.ones(m, bool)
+    missing, missing_pay = need.astype(float).copy(), need_payload.astype(float).copy()
+    member, teams = np.zeros((n, m), bool), {}
+    while True:
+        can = (allowed & free[:, None]).astype(float)
+        completable = covered(can.T @ caps, can.T @ payload, missing, missing_pay)
+        for q in np.flatnonzero(open_task & roles):
+            pool = member[:, q] | (free & allowed[:, q])
+            completable[q] = covers(caps[pool], payload[pool], need[q], need_payload[q], True)
+        dead = np.flatnonzero(open_task & ~completable & member.any(axis=0))
+        if len(dead):
+            free |= member[:, dead[0]]
+            member[:, dead[0]] = False
+            open_task[dead[0]] = False
+            continue
+        if not free.any():
+            break
+        useful = helps(caps, missing, missing_pay)
+        useful[:, roles] = helps(caps, need[roles], need_payload[roles])
+        ok = free[:, None] & (open_task & completable)[None, :] & useful & allowed
+        scores = np.concatenate([np.where(ok, r[:, :m], -np.inf), np.where(free, r[:, m], -np.inf)[:, None]], 1)
+        i, j = divmod(int(np.argmax(scores)), m + 1)
+        free[i] = False
+        if j == m:
+            waiting[i] = True
+            continue
+        member[i, j] = True
+        missing[j] -= caps[i]
+        missing_pay[j] -= payload[i]
+        team = np.flatnonzero(member[:, j])
+        if covers(caps[team], payload[team], need[j], need_payload[j], bool(roles[j])):
+            kept = [int(x) for x in team]
+            for q in sorted(kept, key=lambda q: r[q, j]):
+                rest = [x for x in kept if x != q]
+                if rest and covers(caps[rest], payload[rest], need[j], need_payload[j], bool(roles[j])):
+                    kept = rest
+            free[team] = True
+            free[kept] = False
+            member[:, j] = False
+            member[kept, j] = True
+            open_task[j] = False
+            teams[j] = tuple(kept)
+    return teams, tuple(int(i) for i in np.flatnonzero(waiting))
+
+
+@pytest.mark.parametrize("seed", range(300))
+def test_greedy_is_the_one_pick_at_a_time_greedy(seed):
+    """The greedy's batched idle picks and updated sums give the same subteams and waits
+    as taking every pick alone and recomputing everything: many robots, few tasks, idle
+    rewards often the largest, allowed pairs, roles, partial subteams released."""
+    rng = np.random.default_rng(seed)
+    n, m, k = int(rng.integers(1, 40)), int(rng.integers(1, 6)), int(rng.integers(1, 4))
+    caps = rng.integers(0, 3, (n, k)).astype(float) * (rng.random((n, k)) < 0.5)
+    need = rng.integers(0, 4, (m, k)).astype(float) * (rng.random((m, k)) < 0.6)
+    payload = np.round(rng.uniform(0, 3, n), 1)
+    need_payload = np.round(rng.uniform(0, 6, m), 1) * (rng.random(m) < 0.6)
+    r = rng.normal(size=(n, m + 1))
+    r[:, m] += rng.uniform(-1, 2)  # sometimes most robots would rather wait
+    allowed = None if seed % 3 == 0 else rng.random((n, m)) < 0.8
+    roles = rng.random(m) < (0.3 if seed % 2 else 0.0)
+    got = greedy_match(r, caps, payload, need, need_payload, allowed, roles)
+    assert (got.teams, got.waiting) == _one_pick_at_a_time(r, caps, payload, need, need_payload, allowed, roles)

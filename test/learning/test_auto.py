@@ -84,3 +84,21 @@ def test_where_no_quick_plan_fits_the_budget_auto_takes_grp_steps_without_trying
     assert sched.makespan <= grp.makespan + 1e-9
     assert auto.fallbacks > 0
     assert auto.plans <= 9  # tried again only when half as many tasks were left (120 -> 60 -> ... -> 1)
+
+
+def test_after_searches_that_do_not_pay_auto_follows_its_plan_between_fewer_searches():
+    """A depot cell of 12 robots x 60 tasks with travel: hundreds of decision steps. After
+    SEARCH_PATIENCE searches in a row without a shorter plan, steps are followed without a
+    search (1, 2, 4, ... between searches); the run stays valid and never worse than its
+    quick plan, and every step with a search still decides within its budget's reach."""
+    from lvws_ros.core.families import family_instance
+    from lvws_ros.learning.auto import SEARCH_PATIENCE
+
+    inst = family_instance("depot", 0, 0, num_robots=12, num_tasks=60)
+    auto = AutoPolicy(budget_ms=200.0, workers=1)
+    res = simulate(inst, auto)
+    assert check_schedule(inst, res.schedule) == []
+    assert res.schedule.makespan <= simulate(inst, GreedyPayloadPolicy()).schedule.makespan + 1e-9
+    steps = len(res.steps)
+    assert steps > 4 * SEARCH_PATIENCE and auto.skipped > 0
+    assert auto.skipped < steps  # it searched on some steps

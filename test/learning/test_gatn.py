@@ -105,3 +105,26 @@ def test_a_few_training_steps_reduce_the_eq12_loss():
         opt.step()
         losses.append(loss.item())
     assert losses[-1] < 0.8 * losses[0], (losses[0], losses[-1])
+
+
+@pytest.mark.parametrize("scale", [1.0, 10.0, 60.0])
+def test_the_complete_graph_in_n_log_n_is_the_dense_gat(scale):
+    """At inference a complete robot graph (no adjacency, every node real) takes the
+    sorted prefix-sum form of Eqs. 1-2; it gives the dense rows' values up to float
+    rounding, also with large logits (no overflow) and tied scores, with 1 and 2 nodes."""
+    torch.manual_seed(3)
+    layer = GATLayer(16, 16, 4)
+    with torch.no_grad():
+        layer.a_src.mul_(scale)
+        layer.a_dst.mul_(scale)
+    for n in (1, 2, 7, 300):
+        h = torch.randn(2, n, 16) * 2
+        h[:, n // 2:] = h[:, :1]  # many equal scores
+        mask = torch.ones(2, n, dtype=torch.bool)
+        with torch.no_grad():
+            layer.train()
+            dense = layer(h, None, mask)
+            layer.eval()
+            fast = layer(h, None, mask)
+        assert torch.isfinite(fast).all()
+        assert torch.allclose(fast, dense, rtol=1e-4, atol=1e-5 * float(dense.abs().max())), (scale, n)
