@@ -209,7 +209,8 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
     successor literals carry the travel between consecutive tasks (rounded up to ticks,
     so a schedule of the model is valid in real time). With the objective "return" the arc
     back to the start node carries the way home: the makespan is when the last robot is
-    home (an idle robot goes home from where it is when free)."""
+    home (a robot given nothing more goes home from where it is when its last task ended,
+    which may be before now, as the executor counts it)."""
     tr = inst.travel
     if tr is None or state.robot_site is None:
         return
@@ -227,16 +228,16 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
     back = inst.objective == "return"
     for r in range(inst.num_robots):
         tasks = [j for j in h.todo if r in member[j]]
-        go_home = up(tr.time(r, int(site[r]), tr.home(r))) if back else 0
+        home_at = h.ticks(float(state.robot_free_at[r])) + up(tr.time(r, int(site[r]), tr.home(r))) if back else 0
         if not tasks:
             if back:
-                model.add(makespan >= h.free_at[r] + go_home)
+                model.add(makespan >= home_at)
             continue
         node = {j: k + 1 for k, j in enumerate(tasks)}
         idle = model.new_bool_var(f"idle_{r}")
         arcs: list[tuple[int, int, Any]] = [(0, 0, idle)]
         if back:
-            model.add(makespan >= h.free_at[r] + go_home).only_enforce_if(idle)
+            model.add(makespan >= home_at).only_enforce_if(idle)
         for j in tasks:
             y = member[j][r]
             arcs.append((node[j], node[j], y.Not()))

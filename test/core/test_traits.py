@@ -410,3 +410,24 @@ def test_lvws_with_the_exact_matching_is_valid_on_tasks_with_roles():
         inst = family_instance("traits-roles", index, 0)
         s = simulate(inst, make_policy("lvws", matching="exact")).schedule
         assert check_schedule(inst, s) == [], inst.name
+
+
+def test_the_exact_expert_from_a_later_state_sends_an_idle_robot_home_from_when_it_was_free():
+    """With "return", robot x ends its only task at 1 far from its home and waits there
+    while y works until 20: the executor counts x home at 11, not at 20 + its way. The
+    expert solving from the state at 20 (as DAgger labels states) must agree: 21."""
+    data = {"format": "lvws-instance/1", "name": "late", "objective": "return", "traits": ["any", "long"],
+            "sites": {"a": [0, 0], "b": [10, 0]},
+            "robots": [{"id": "x", "traits": {"any": 1}, "site": "a", "home": "b", "speed": 1.0},
+                       {"id": "y", "traits": {"any": 1, "long": 1}, "site": "a", "speed": 1.0}],
+            "tasks": [{"id": "t0", "requires": {"any": 1}, "duration": 1, "after": [], "site": "a"},
+                      {"id": "t1", "requires": {"long": 1}, "duration": 20, "after": [], "site": "a"},
+                      {"id": "t2", "requires": {"long": 1}, "duration": 1, "after": ["t1"], "site": "a"}]}
+    inst = instance_from_dict(data)
+    steps = simulate(inst, make_policy("grp"), record_states=True).steps
+    later = [s.state for s in steps if s.state is not None and s.state.time >= 20]
+    assert later and later[0].time == pytest.approx(20.0)
+    for formulation in ("coalition", "boolean"):
+        res = solve_exact(inst, state=later[0], time_limit=10, workers=1, formulation=formulation)
+        assert res.makespan == pytest.approx(21.0) and res.status == "optimal"
+        assert check_schedule(inst, res.schedule) == []
