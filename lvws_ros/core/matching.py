@@ -75,10 +75,10 @@ def _idle_first(r: FloatArray, rows: IntArray, ok: BoolArray, free_caps: FloatAr
     if (partial & with_roles).any():
         return rows[:0]
     best_task = float(np.max(np.where(ok, r[rows, :m], -np.inf), initial=-np.inf))
-    cand = rows[r[rows, m] > best_task]
+    cand: IntArray = rows[r[rows, m] > best_task]
     if len(cand) < 2:
         return cand
-    order = cand[np.lexsort((cand, -r[cand, m]))]
+    order: IntArray = cand[np.lexsort((cand, -r[cand, m]))]
     tasks = np.flatnonzero(partial)
     if not len(tasks):
         return order
@@ -88,7 +88,7 @@ def _idle_first(r: FloatArray, rows: IntArray, ok: BoolArray, free_caps: FloatAr
     still = covered(free_caps[tasks][None] - gone_caps, free_payload[tasks][None] - gone_payload,
                     missing_caps[tasks][None], missing_payload[tasks][None])  # (c, p)
     short = np.flatnonzero(~still.all(axis=1))
-    return order if not len(short) else order[: int(short[0]) + 1]
+    return order if not len(short) else np.asarray(order[: int(short[0]) + 1], dtype=np.int64)
 
 
 def _drop_redundant(team: list[int], rewards: FloatArray, robot_caps: AmountArray, robot_payload: FloatArray,

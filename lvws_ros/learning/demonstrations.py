@@ -268,15 +268,17 @@ def _travel_columns(pairs: np.ndarray, path: Path) -> np.ndarray:
     """Pair features as this version has them. A file written before the travel features
     (LEGACY_PAIR_FEATURES columns), before the busy-robot ones (TRAVEL_PAIR_FEATURES) or
     before the way home (BUSY_PAIR_FEATURES) gets the missing columns as zeros, which is
-    what they are without travel (and, for the way home, in every instance such a file
-    can hold: the objective "return" came with that column); a state with travel (a
-    nonzero travel column) cannot be completed from the travel features alone, and the
-    file must be labelled again (ModelError)."""
+    what they are without travel; a state with travel (a nonzero travel column) cannot be
+    completed (its instance may have had the objective "return", which the file does not
+    say), and the file must be labelled again (ModelError)."""
     width = pairs.shape[-1] if pairs.ndim == 3 else -1
     if width == PAIR_FEATURES:
         return pairs
     if width == TRAVEL_PAIR_FEATURES and pairs[..., LEGACY_PAIR_FEATURES:].any():
         raise ModelError(f"{path}: travel states without the busy-robot pair features ({width} of {PAIR_FEATURES}): "
+                         "written by an older version")
+    if width == BUSY_PAIR_FEATURES and pairs[..., LEGACY_PAIR_FEATURES:].any():
+        raise ModelError(f"{path}: travel states without the way-home pair feature ({width} of {PAIR_FEATURES}): "
                          "written by an older version")
     if width in (LEGACY_PAIR_FEATURES, TRAVEL_PAIR_FEATURES, BUSY_PAIR_FEATURES):
         pad = np.zeros((*pairs.shape[:-1], PAIR_FEATURES - width), pairs.dtype)

@@ -12,7 +12,7 @@ fixed robot elsewhere) is never picked for it, and GRP takes the subteam that ca
 there first (the smallest arrival of its slowest member), the lightest among those;
 without travel every arrival is 0 and the choices are the paper's. With ``"objective":
 "return"`` (formats.md), in the last wave of tasks GRP counts each robot's way home from
-where the task ends into its arrival: the subteam home soonest.
+where the task ends into its arrival (robots that could be back sooner first).
 Subteams are inclusion-minimal (a superset only ties up more robots, the duration
 being the same) and built constructively (:mod:`lvws_ros.core.subteams`), never by
 enumerating subsets: any team size, polynomial time.
@@ -101,7 +101,9 @@ class GreedyPayloadPolicy(_SequentialPolicy):
     def arrivals(self, state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
         """Seconds each free robot needs to reach ``task``; with ``"objective": "return"``,
         in the last wave (every task not started is ready, so a robot's task now may be
-        its last), plus its way home from where the task ends: the team home soonest."""
+        its last), plus its own way home from where the task ends: robots are ranked by
+        when they could be back (a heuristic: it ignores the members' latest arrival and
+        the tasks still to come)."""
         out = super().arrivals(state, free, task)
         inst = state.instance
         if inst.objective != "return" or inst.travel is None or (state.task_status == TaskStatus.QUEUED).any():

@@ -132,7 +132,7 @@ def cell_task_to_msg(item: dict[str, Any], k: int = 0) -> CellTask:
     """A task entry of the cell config (``from``/``to`` or ``cell``) as a CellTask
     (ConfigError naming entry ``k``)."""
     try:
-        requires = item.get("requires") or {}
+        requires = item.get("requires", {})
         if not isinstance(requires, dict):
             raise ConfigError(f"task {k}: requires must map trait names to amounts, got {requires!r}")
         return CellTask(id=str(item["id"]), type=str(item["type"]), object=str(item.get("object", "")),
@@ -153,6 +153,8 @@ def cell_task_from_msg(msg: Any) -> dict[str, Any]:
     names, amounts = list(msg.require_names), [float(v) for v in msg.requires]
     if len(names) != len(amounts):
         raise ConfigError(f"task {msg.id!r}: {len(names)} require_names but {len(amounts)} requires")
+    if len(set(names)) != len(names):
+        raise ConfigError(f"task {msg.id!r}: require_names names a trait twice: {names}")
     if names:
         entry["requires"] = dict(zip(names, amounts, strict=True))
     if msg.type == "transport":

@@ -13,7 +13,7 @@ from lvws_ros.core.executor import State, simulate
 from lvws_ros.core.families import FAMILIES, TRAINING_FAMILIES, TRAIT_FAMILIES, family_instance
 from lvws_ros.core.formats import instance_from_dict, instance_key, instance_to_dict
 from lvws_ros.core.schedule import check_schedule
-from lvws_ros.errors import ConfigError
+from lvws_ros.errors import ConfigError, ModelError
 from lvws_ros.learning.demonstrations import expert_demos, load_demos, save_demos
 from lvws_ros.learning.features import BUSY_PAIR_FEATURES, MODEL_FORMATS, PAIR_FEATURES, InstanceFeatures
 from lvws_ros.policies.exact import solve_exact
@@ -53,13 +53,18 @@ def test_the_way_home_feature_is_the_squashed_time_home_from_where_the_task_ends
     assert np.all(InstanceFeatures(plain).encode(State.initial(plain)).pairs[..., PAIR_FEATURES - 1] == 0)
 
 
-def test_demonstrations_written_before_the_way_home_read_with_a_zero_column(tmp_path):
-    demos = expert_demos(dataset_instance(DATASETS["IV"], 0, seed=0), time_limit=5, workers=1)
-    assert all(not d.features.pairs[..., PAIR_FEATURES - 1].any() for d in demos)  # objective makespan
-    save_demos([replace(d, features=replace(d.features, pairs=d.features.pairs[..., :BUSY_PAIR_FEATURES]))
-                for d in demos], tmp_path / "old.npz")
-    back, _ = load_demos(tmp_path / "old.npz")
-    assert all(np.array_equal(a.features.pairs, b.features.pairs) for a, b in zip(back, demos, strict=True))
+def test_demonstrations_written_before_the_way_home_read_with_a_zero_column_without_travel(tmp_path):
+    """Without travel the way home is 0 (padded); with travel the file cannot say whether
+    its instances returned home, so it is refused (labelled again)."""
+    plain = expert_demos(dataset_instance(DATASETS["II"], 3, seed=0), time_limit=5, workers=1)
+    travel = expert_demos(dataset_instance(DATASETS["IV"], 0, seed=0), time_limit=5, workers=1)
+    for name, demos in (("plain", plain), ("travel", travel)):
+        save_demos([replace(d, features=replace(d.features, pairs=d.features.pairs[..., :BUSY_PAIR_FEATURES]))
+                    for d in demos], tmp_path / f"{name}.npz")
+    back, _ = load_demos(tmp_path / "plain.npz")
+    assert all(np.array_equal(a.features.pairs, b.features.pairs) for a, b in zip(back, plain, strict=True))
+    with pytest.raises(ModelError, match=r"travel\.npz: travel states without the way-home pair feature"):
+        load_demos(tmp_path / "travel.npz")
 
 
 def test_grp_sends_the_robot_whose_home_is_there_in_the_last_wave():

@@ -115,5 +115,10 @@ def test_a_submitted_task_carries_its_traits_through_a_cell_task_message():
     msg.requires = [3.0]
     with pytest.raises(ConfigError, match="task 't20': 2 require_names but 1 requires"):
         cell_task_from_msg(msg)
-    with pytest.raises(ConfigError, match="task 0: requires must map"):
-        cell_task_to_msg({**entry, "requires": [3]})
+    msg.requires = [3.0, 0.5]
+    msg.require_names = ["battery", "battery"]
+    with pytest.raises(ConfigError, match="task 't20': require_names names a trait twice"):
+        cell_task_from_msg(msg)
+    for bad in ([3], None):
+        with pytest.raises(ConfigError, match="task 0: requires must map"):
+            cell_task_to_msg({**entry, "requires": bad})
