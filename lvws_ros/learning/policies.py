@@ -216,19 +216,24 @@ class OutOfTime(Exception):
 
 
 class Until:
-    """``policy`` that raises OutOfTime at its first decision past ``deadline`` (perf_counter)."""
+    """``policy`` that raises OutOfTime at its first decision that would end past
+    ``deadline`` (perf_counter): when the time left is less than its slowest decision so far."""
 
     def __init__(self, policy: Policy, deadline: float) -> None:
         self.policy, self.deadline = policy, deadline
         self.name = getattr(policy, "name", "policy")
+        self.slowest = 0.0  # seconds of its slowest decision so far
 
     def reset(self, instance: Instance) -> None:
         self.policy.reset(instance)
 
     def decide(self, state: State) -> Decision:
-        if time.perf_counter() > self.deadline:
+        t0 = time.perf_counter()
+        if t0 + self.slowest > self.deadline:
             raise OutOfTime
-        return self.policy.decide(state)
+        decision = self.policy.decide(state)
+        self.slowest = max(self.slowest, time.perf_counter() - t0)
+        return decision
 
 
 def continue_after(state: State, decision: Decision, policy: Policy, deadline: float | None = None) -> float:

@@ -76,15 +76,18 @@ def sample_schedules(policy: LVWSPolicy, state: State, samples: int, temperature
     pass per lockstep step over the distinct states that need a decision; each schedule's
     matching reads R + ``temperature`` x Gumbel noise (temperature 0: LVWS's own
     decisions). The finished ones, in the order sampled (a schedule that would stall is
-    dropped, and so is every one unfinished at ``deadline``, a perf_counter value)."""
+    dropped, and so is every one unfinished at ``deadline``, a perf_counter value: no
+    lockstep step starts that would end past it, by the slowest step so far)."""
     cache = policy.features(state.instance)
     states: dict[int, State] = {k: state.copy() for k in range(samples)}
     steps: dict[int, list[PlannedStep]] = {k: [] for k in range(samples)}
     seen: dict[int, list[State]] = {k: [] for k in range(samples)}
     liked = dict.fromkeys(range(samples), 0.0)
     done: dict[int, Sampled] = {}
+    slowest = 0.0  # seconds of the slowest lockstep step so far
     while states:
-        if deadline is not None and time.perf_counter() > deadline:
+        t0 = time.perf_counter()
+        if deadline is not None and t0 + slowest > deadline:
             break
         need = {k: _key(s) for k, s in states.items() if s.free_robots() and s.ready_tasks()}
         distinct: dict[StateKey, int] = {}  # the distinct states, each encoded once, by first sample
@@ -116,6 +119,7 @@ def sample_schedules(policy: LVWSPolicy, state: State, samples: int, temperature
                 del states[k]
             else:
                 states[k] = nxt
+        slowest = max(slowest, time.perf_counter() - t0)
     return [done[k] for k in sorted(done)]
 
 
