@@ -230,6 +230,8 @@ class AutoPolicy:
         one = math.inf  # seconds per sampled schedule in the latest round: rounds sized to the time left
         while not self.proven and self.sampling_fits and self.sampler.temperature > 0 \
                 and (t0 := time.perf_counter()) < deadline:
+            if math.isfinite(one) and deadline - t0 < one:  # not even one schedule would finish in time
+                break
             count = self.sampler.samples if not math.isfinite(one) else \
                 min(self.sampler.samples, max(1, int((deadline - t0) / max(one, 1e-6))))
             found = sample_schedules(self.sampler.base, state, count, self.sampler.temperature, self.rng,
