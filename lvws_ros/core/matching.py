@@ -51,13 +51,12 @@ def match_reward(r: FloatArray, teams: dict[int, tuple[int, ...]], waiting: tupl
     return float(sum(r[i, j] for j, team in teams.items() for i in team) + sum(r[i, m] for i in waiting))
 
 
-def _best_pick(r: FloatArray, ok: BoolArray, free: BoolArray) -> tuple[int, int]:
-    """(robot, column) of the largest reward among the allowed (robot, task) pairs and
-    the free robots' idle column (column m)."""
+def _best_pick(r: FloatArray, ok: BoolArray) -> tuple[int, int]:
+    """(row, column) of the largest reward among the allowed (robot, task) pairs and the
+    idle column (column m), ``r`` holding the free robots' rows only."""
     m = r.shape[1] - 1
     scores = np.where(ok, r[:, :m], -np.inf)
-    idle = np.where(free, r[:, m], -np.inf)
-    i, j = divmod(int(np.argmax(np.concatenate([scores, idle[:, None]], axis=1))), m + 1)
+    i, j = divmod(int(np.argmax(np.concatenate([scores, r[:, m:]], axis=1))), m + 1)
     return i, j
 
 
@@ -161,7 +160,7 @@ def greedy_match(
         # (one task at a time, since released robots may complete another).
         completable = covered(free_caps, free_payload, missing_caps, missing_payload)
         for q in np.flatnonzero(open_task & with_roles):
-            pool = member[:, q] | (free if allowed is None else free & allowed[:, q])  # exactly, with roles
+            pool = member[:, q] | (free & reach[:, q])  # exactly, with roles
             completable[q] = covers(amounts[pool], robot_payload[pool], task_caps[q], task_payload[q], True)
         dead = np.flatnonzero(open_task & ~completable & member.any(axis=0))
         if len(dead):
@@ -182,7 +181,7 @@ def greedy_match(
             waiting[idle] = True
             shift(idle, -1.0)
             continue
-        k, j = _best_pick(r[rows], ok, np.ones(len(rows), dtype=bool))
+        k, j = _best_pick(r[rows], ok)
         i = int(rows[k])
         free[i] = False
         shift(np.array([i]), -1.0)
@@ -192,11 +191,10 @@ def greedy_match(
         member[i, j] = True
         missing_caps[j] -= amounts[i]
         missing_payload[j] -= robot_payload[i]
-        if not with_roles[j]:
-            useful[:, j] = helps(amounts, missing_caps[j][None, :], missing_payload[j:j + 1])[:, 0]
         if with_roles[j]:
             done = covers(amounts[member[:, j]], robot_payload[member[:, j]], task_caps[j], task_payload[j], True)
         else:
+            useful[:, j] = helps(amounts, missing_caps[j][None, :], missing_payload[j:j + 1])[:, 0]
             done = bool(covered(np.zeros_like(missing_caps[j]), 0.0, missing_caps[j], missing_payload[j]))
         if done:
             team = _drop_redundant([int(x) for x in np.flatnonzero(member[:, j])], r[:, j], amounts,

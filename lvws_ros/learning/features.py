@@ -146,8 +146,9 @@ class InstanceFeatures:
         self.rc32 = rc.astype(np.float32)
         self.tc32 = tc.astype(np.float32)
         self.need = np.maximum(tc.sum(axis=1), 1).astype(np.float32)
-        returns = read > BUSY_PAIR_FEATURES and inst.objective == "return" and inst.travel is not None
-        self.home_after = inst.travel.ways_home() / self.time_unit if returns and inst.travel else None  # (N, M)
+        tr = inst.travel  # the way home (N, M), read by lvws-gatn/5 models, with "return" and travel only
+        self.home_after = tr.ways_home() / self.time_unit \
+            if read > BUSY_PAIR_FEATURES and inst.objective == "return" and tr is not None else None
 
     def encode(self, state: State, rows: npt.ArrayLike | None = None) -> GraphFeatures:
         """Features of ``state``; ``rows`` (default: the free robots) choose the pair rows."""

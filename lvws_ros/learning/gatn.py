@@ -125,8 +125,8 @@ class GATLayer(_GATWeights):
         is scaled to at most 1 by the row's largest logit, LeakyReLU(s_i + max t)). The
         same values as the dense rows up to float rounding. wh: (B, n, H, d)."""
         slope = float(self.act.negative_slope)
-        s = s_src.permute(0, 2, 1).double()  # (B, H, n)
-        t, order = torch.sort(s_dst.permute(0, 2, 1).double(), dim=-1)
+        s, t_own = s_src.permute(0, 2, 1).double(), s_dst.permute(0, 2, 1).double()  # (B, H, n)
+        t, order = torch.sort(t_own, dim=-1)
         v = torch.gather(wh.permute(0, 2, 1, 3).double(), 2, order.unsqueeze(-1).expand(-1, -1, -1, wh.shape[-1]))
         top = t[..., -1:]  # (B, H, 1)
         high, low = torch.exp(t - top), torch.exp(slope * (t - top))  # (B, H, n), at most 1
@@ -145,7 +145,7 @@ class GATLayer(_GATWeights):
         num = a_high.unsqueeze(-1) * (high_v[:, :, -1:] - torch.gather(high_v, 2, kv)) \
             + a_low.unsqueeze(-1) * torch.gather(low_v, 2, kv)
         den = a_high * (high_w[..., -1:] - torch.gather(high_w, -1, k)) + a_low * torch.gather(low_w, -1, k)
-        own = (torch.exp(self.act(s + s_dst.permute(0, 2, 1).double()) - peak) / den).unsqueeze(-1)  # alpha_ii
+        own = (torch.exp(self.act(s + t_own) - peak) / den).unsqueeze(-1)  # alpha_ii
         mine = wh.permute(0, 2, 1, 3).double()
         out = own * mine + self.act(num / den.unsqueeze(-1) - own * mine)  # (B, H, n, d)
         return out.permute(0, 2, 1, 3).to(wh.dtype)

@@ -735,13 +735,15 @@ def _role_slots(model: cp_model.CpModel, member: list[cp_model.IntVar], covered:
     cols = [int(k) for k in np.flatnonzero(want > 0)]
     slot = {(i, k): model.new_bool_var(f"y_{i}_{k}_{tag}") for i in range(len(member)) for k in cols
             if amounts[i, k] > 0}
+    mine: dict[int, list[cp_model.IntVar]] = {i: [] for i in range(len(member))}  # each member's slots
+    for (i, _), v in slot.items():
+        mine[i].append(v)
     for i, x in enumerate(member):
-        mine = [v for (i2, _), v in slot.items() if i2 == i]
-        if mine:
-            model.add(sum(mine) <= x)
+        if mine[i]:
+            model.add(sum(mine[i]) <= x)
     sums = {k: sum(int(amounts[i, k]) * v for (i, k2), v in slot.items() if k2 == k) for k in cols}
     for k in cols:
-        if not any(k2 == k for _, k2 in slot):
+        if isinstance(sums[k], int):  # nobody holds it
             model.add(covered == 0)
         else:
             model.add(sums[k] >= int(want[k])).only_enforce_if(covered)
@@ -754,7 +756,7 @@ def _role_slots(model: cp_model.CpModel, member: list[cp_model.IntVar], covered:
     for i, x in enumerate(member):
         short = model.new_bool_var(f"short_{i}_{tag}")  # the payload would fall short without i
         model.add(carried - int(pay[i]) < need).only_enforce_if(short)
-        model.add_bool_or([short, *(v for (i2, _), v in slot.items() if i2 == i)]).only_enforce_if(x)
+        model.add_bool_or([short, *mine[i]]).only_enforce_if(x)
 
 
 def _only_needed_members(model: cp_model.CpModel, member: list[cp_model.IntVar], carried: Any,
