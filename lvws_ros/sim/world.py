@@ -45,7 +45,7 @@ from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import shortfall
 from lvws_ros.core.travel import Travel, build_travel
-from lvws_ros.errors import AssignmentRejected, ConfigError, WorldEventRejected
+from lvws_ros.errors import AssignmentRejected, ConfigError, InstanceError, WorldEventRejected
 from lvws_ros.sim.config import (
     ARM_KINDS,
     FLOOR,
@@ -332,8 +332,15 @@ class CellSim:
 
     # -- a changing world ------------------------------------------------------------------
     def _rebuild(self, tasks: Sequence[TaskSpec]) -> None:
-        self.cfg = replace(self.cfg, tasks=tuple(tasks))
-        self.inst = build_instance(self.cfg)
+        """The world's task set is ``tasks``; WorldEventRejected (nothing changed) when the
+        scheduling instance refuses it (a task the team can never cover, a trait the cell
+        does not name)."""
+        cfg = replace(self.cfg, tasks=tuple(tasks))
+        try:
+            inst = build_instance(cfg)
+        except InstanceError as exc:
+            raise WorldEventRejected(str(exc)) from None
+        self.cfg, self.inst = cfg, inst
         self._task_spec = {t.id: t for t in self.cfg.tasks}
 
     @staticmethod

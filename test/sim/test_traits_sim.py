@@ -46,3 +46,12 @@ def test_a_task_submitted_at_run_time_carries_its_traits(tmp_path):
     with pytest.raises(WorldEventRejected, match="task t21: unknown trait 'laser'"):
         sim.submit([{"id": "t21", "type": "assembly", "object": "obj1", "cell": "cell_3", "duration": 1.0,
                      "after": ["t14"], "requires": {"laser": 1}}])
+
+
+def test_a_submitted_task_the_team_can_never_cover_is_refused_and_the_world_is_unchanged(tmp_path):
+    sim = CellSim(trait_cell_config(tmp_path))
+    tasks, status = sim.cfg.tasks, dict(sim.status)
+    with pytest.raises(WorldEventRejected, match="task 't20' can never be covered: needs battery 100"):
+        sim.submit([{"id": "t20", "type": "transport", "object": "obj3", "from": "cell_3", "to": "cell_1",
+                     "after": ["t14"], "requires": {"battery": 100}}])
+    assert sim.cfg.tasks == tasks and sim.status == status and "t20" not in sim.inst.task_index
