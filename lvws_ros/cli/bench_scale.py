@@ -201,14 +201,15 @@ def bench_lns(seed: int, seconds: float = LNS_SECONDS) -> None:
     from lvws_ros.core.bounds import lower_bounds
     from lvws_ros.core.executor import simulate
     from lvws_ros.core.schedule import check_schedule
-    from lvws_ros.policies.lns import DEFAULT_WINDOW, improve
+    from lvws_ros.policies.lns import DEFAULT_WINDOW, DEFAULT_WINDOW_TRAVEL, improve
     from lvws_ros.registry import make_policy
 
-    print(f"\n## Large-neighbourhood search from GRP (seed {seed}, {seconds:g} s, 1 worker, window {DEFAULT_WINDOW})")
+    print(f"\n## Large-neighbourhood search from GRP (seed {seed}, {seconds:g} s, 1 worker, window {DEFAULT_WINDOW}, "
+          f"{DEFAULT_WINDOW_TRAVEL} with travel)")
     print("| family | N x M | GRP | LNS | LNS / GRP | rounds | improved | lower bound | LNS gap | valid |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    for family, n, m in (("subteam-heavy", 30, 100), ("ours", 30, 100), ("subteam-heavy", 100, 500),
-                         ("ours", 100, 500)):
+    for family, n, m in (("subteam-heavy", 30, 100), ("ours", 30, 100), ("depot", 30, 100), ("subteam-heavy", 100, 500),
+                         ("ours", 100, 500), ("depot", 100, 500)):
         inst = make_instance(family, n, m, seed)
         grp = simulate(inst, make_policy("grp")).schedule
         bound = lower_bounds(inst).best

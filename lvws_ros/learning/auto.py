@@ -7,7 +7,7 @@ plan to follow, ``auto``
    finish, under the budget), and takes the shorter;
 2. improves it while the budget lasts: CP-SAT from the state, warm-started from the
    incumbent (for a cell of at most ``exact_tasks`` tasks still to do; a proof of
-   optimality ends the search for the run) or, for a bigger cell without travel,
+   optimality ends the search for the run) or, for a bigger cell (with travel too),
    large-neighbourhood search on the plan (:mod:`~lvws_ros.policies.lns`), then LVWS sampling
    (only where LVWS's own quick plan finished within the budget: a sample costs as much)
    (:func:`~lvws_ros.learning.sampling.sample_schedules`) in rounds sized to the time left;
@@ -168,14 +168,14 @@ class AutoPolicy:
 
     def _lns(self, state: State, todo: int, deadline: float) -> None:
         """Large-neighbourhood search on the plan from ``state`` (cells too big for CP-SAT's
-        whole model; not with travel), followed when shorter. Time is kept back for turning
+        whole model), followed when shorter. Time is kept back for turning
         an improved schedule into steps (measured per task to do), all within ``deadline``."""
         from lvws_ros.policies.exact import ExactPolicy, ExpertResult
         from lvws_ros.policies.lns import improve
 
         left = deadline - time.perf_counter()
         seconds = left * EXACT_SHARE - self.follow_per_task * todo
-        if state.instance.travel is not None or self._schedule is None or not self.plan.steps or seconds <= 0.05:
+        if self._schedule is None or not self.plan.steps or seconds <= 0.05:
             return
         try:
             found = improve(state.instance, self._schedule, state=state, time_limit=seconds, workers=1,

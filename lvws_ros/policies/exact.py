@@ -34,7 +34,7 @@ large-neighbourhood search built on it) are the only ones that import OR-Tools.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -201,8 +201,17 @@ def _travel_times(inst: Instance, state: State) -> np.ndarray:
     return (tr.distance[np.ix_(origins, np.unique(ends))][..., None] / speeds).reshape(-1)
 
 
+@dataclass
+class _TravelVars:
+    """The travel model's variables: each task's departure, and per robot its circuit's
+    arcs by (from, to) task (None: the robot's start node)."""
+
+    depart: dict[int, cp_model.IntVar]
+    arcs: dict[int, dict[tuple[int | None, int | None], cp_model.IntVar]]
+
+
 def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon, start: dict[int, cp_model.IntVar],
-                member: dict[int, dict[int, cp_model.IntVar]], makespan: cp_model.IntVar) -> None:
+                member: dict[int, dict[int, cp_model.IntVar]], makespan: cp_model.IntVar) -> _TravelVars | None:
     """The executor's travel. Each task has a departure D_j: its subteam sets out once the
     task is ready and every member is free, and the task starts when the last member is
     there. Per robot, a circuit through its start (node 0) and the tasks it may do; its
@@ -213,7 +222,7 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
     which may be before now, as the executor counts it)."""
     tr = inst.travel
     if tr is None or state.robot_site is None:
-        return
+        return None
     site = state.robot_site
 
     def up(seconds: float) -> int:
@@ -226,6 +235,7 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
         for p in inst.prerequisites[j]:  # ready when it sets out
             model.add(depart[j] >= (start[p] + h.dur[p] if p in h.dur else h.ticks(h.fixed_end[p])))
     back = inst.objective == "return"
+    out = _TravelVars(depart, {})
     for r in range(inst.num_robots):
         tasks = [j for j in h.todo if r in member[j]]
         home_at = h.ticks(float(state.robot_free_at[r])) + up(tr.time(r, int(site[r]), tr.home(r))) if back else 0
@@ -236,6 +246,7 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
         node = {j: k + 1 for k, j in enumerate(tasks)}
         idle = model.new_bool_var(f"idle_{r}")
         arcs: list[tuple[int, int, Any]] = [(0, 0, idle)]
+        named = out.arcs[r] = {(None, None): idle}
         if back:
             model.add(makespan >= home_at).only_enforce_if(idle)
         for j in tasks:
@@ -248,6 +259,7 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
             first = model.new_bool_var(f"first_{r}_{j}")
             last = model.new_bool_var(f"last_{r}_{j}")
             arcs += [(0, node[j], first), (node[j], 0, last)]
+            named[None, j], named[j, None] = first, last
             if back:
                 model.add(makespan >= start[j] + h.dur[j] + up(tr.time(r, tr.task_to[j], tr.home(r)))).only_enforce_if(last)
             model.add(depart[j] >= h.free_at[r]).only_enforce_if(first)
@@ -258,9 +270,29 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
                     continue
                 lit = model.new_bool_var(f"next_{r}_{j}_{k}")
                 arcs.append((node[j], node[k], lit))
+                named[j, k] = lit
                 model.add(depart[k] >= start[j] + h.dur[j]).only_enforce_if(lit)
                 model.add(start[k] >= depart[k] + up(move)).only_enforce_if(lit)
         model.add_circuit(arcs)
+    return out
+
+
+def _hint_travel(inst: Instance, state: State, model: cp_model.CpModel, tv: _TravelVars, sched: Schedule,
+                 teams: dict[int, set[int]], ticks: Callable[[float], int]) -> None:
+    """Hint the travel model with ``sched`` (left-shifted from ``state``) and the subteams
+    hinted for its tasks (``teams``): each task's departure, and each robot's circuit
+    through its tasks in the model in the order it does them there."""
+    by_task = sched.by_task()
+    leave = departures(inst, sched, state)
+    for j, d in tv.depart.items():
+        if inst.tasks[j].id in leave:
+            model.add_hint(d, ticks(leave[inst.tasks[j].id]))
+    for r, named in tv.arcs.items():
+        mine = {j for pair in named for j in pair if j is not None}
+        order = sorted((j for j in mine if r in teams.get(j, ())), key=lambda j: (by_task[inst.tasks[j].id].start, j))
+        used = set(zip([None, *order], [*order, None], strict=True)) if order else {(None, None)}
+        for pair, lit in named.items():
+            model.add_hint(lit, pair in used)
 
 
 def _coalitions(inst: Instance, todo: list[int]) -> dict[int, list[tuple[int, ...]]] | None:
@@ -467,9 +499,11 @@ def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
     return _Model(model, start, member, None, makespan)
 
 
-def _add_hint(inst: Instance, h: _Horizon, m: _Model, hint: Schedule) -> None:
-    """Hint: the left-shifted heuristic schedule, each subteam cut down to a minimal one."""
+def _add_hint(inst: Instance, h: _Horizon, m: _Model, hint: Schedule) -> dict[int, set[int]]:
+    """Hint: the left-shifted heuristic schedule, each subteam cut down to a minimal one
+    (coalition model); the subteams hinted."""
     by_task = hint.by_task()
+    teams: dict[int, set[int]] = {}
     for j in h.todo:
         a = by_task.get(inst.tasks[j].id)
         if a is None:
@@ -480,10 +514,13 @@ def _add_hint(inst: Instance, h: _Horizon, m: _Model, hint: Schedule) -> None:
             pick = next((k for k, team in enumerate(h.teams[j]) if set(team) <= robots), 0)
             for k, x in enumerate(m.choice[j]):
                 m.model.add_hint(x, k == pick)
+            robots = set(h.teams[j][pick])
         else:
             for r, y in m.member[j].items():
                 m.model.add_hint(y, r in robots)
+        teams[j] = robots
     m.model.add_hint(m.makespan, h.upper)
+    return teams
 
 
 def _solution(inst: Instance, state: State, h: _Horizon, m: _Model, solver: cp_model.CpSolver) -> Schedule:
@@ -532,8 +569,10 @@ def solve_exact(
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
     h = _horizon(inst, state, todo, hint, coalitions=formulation != "boolean")
     m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
-    _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
-    _add_hint(inst, h, m, hint)
+    tv = _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
+    teams = _add_hint(inst, h, m, hint)
+    if tv is not None:
+        _hint_travel(inst, state, m.model, tv, hint, teams, h.ticks)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
     solver.parameters.num_workers = workers

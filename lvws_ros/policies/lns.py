@@ -15,6 +15,15 @@ incumbent: the ``window`` tasks that start first at or after a chosen time ``t0`
 * precedence, one task at a time per robot (no-overlap over the window's optional
   intervals and the later tasks' fixed ones), the makespan.
 
+With travel (sequence-dependent set-ups) the model is the exact expert's travel model
+(:func:`~lvws_ros.policies.exact._add_travel`) over the window's and the later tasks: each
+task sets out at a departure once it is ready and its members are free, and starts when
+the last member is there; per robot, a circuit from where its last task before the
+window leaves it (and when) through the window's tasks it may do and the later tasks it
+does, whose arcs carry the travel; with the objective "return", the way home. Only one
+window's worth of later tasks is in the model then (the circuits grow with the square of
+a robot's tasks in the model), and the window holds DEFAULT_WINDOW_TRAVEL tasks by default.
+
 The objective is the makespan, then the sum of the tasks' ends (so that a window off the
 critical path can still make room). CP-SAT is hinted with the incumbent. The solution's
 subteams and per-robot orders are left-shifted in real time
@@ -22,9 +31,6 @@ subteams and per-robot orders are left-shifted in real time
 a smaller sum of ends). Windows are chosen at random times, and every third one ends at
 the incumbent's makespan (the tasks that make it). The result is valid by construction
 and checked by :func:`~lvws_ros.core.schedule.check_schedule`.
-
-Travel (sequence-dependent set-ups) is not in this neighbourhood model: with travel the
-search returns the incumbent and says so in ``LNSResult.reason``.
 """
 
 from __future__ import annotations
@@ -41,13 +47,24 @@ from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.core.subteams import TOLERANCE, covers, prune
 from lvws_ros.errors import ExpertError
-from lvws_ros.policies.exact import _payload_units, _time_scale, covering_members, left_shift
+from lvws_ros.policies.exact import (
+    _add_travel,
+    _hint_travel,
+    _Horizon,
+    _payload_units,
+    _time_scale,
+    _travel_times,
+    covering_members,
+    left_shift,
+)
 
 DEFAULT_WINDOW = 12  # tasks re-planned per neighbourhood
+DEFAULT_WINDOW_TRAVEL = 6  # the same with travel (chosen on the training family traits-return, 30 x 100)
 ROUND_LIMIT = 0.5  # seconds CP-SAT may take for one neighbourhood
 LATER = 2  # tasks after the window in the model (shifted, not re-planned), in windows
+LATER_TRAVEL = 1  # the same with travel
 
-__all__ = ["DEFAULT_WINDOW", "LNSResult", "improve"]
+__all__ = ["DEFAULT_WINDOW", "DEFAULT_WINDOW_TRAVEL", "LNSResult", "improve"]
 
 
 @dataclass
@@ -57,7 +74,6 @@ class LNSResult:
     improved: int  # of them that shortened the schedule (or kept it and ended its tasks earlier)
     start_makespan: float
     seconds: float
-    reason: str = ""  # why nothing was searched, when so
 
 
 def _score(s: Schedule) -> tuple[float, float]:
@@ -72,22 +88,30 @@ def _better(a: tuple[float, float], b: tuple[float, float]) -> bool:
 
 
 def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int], window: list[int],
-                  later: list[int], scale: int, time_limit: float, workers: int, seed: int) -> Schedule | None:
+                  later: list[int], scale: int, solve_by: float, workers: int, seed: int) -> Schedule | None:
     """One neighbourhood: the window's subteams and starts free, the later tasks' subteams
     and per-robot orders fixed, the prefix as it is (tasks after ``later`` are not in the
-    model: the left shift places them); the left-shifted solution (None: none in time)."""
+    model: the left shift places them); the left-shifted solution (None: none found by
+    ``solve_by``, a perf_counter value the building of the model counts against)."""
     by_task = inc.by_task()
     dur = {j: max(1, round(float(inst.durations[j]) * scale)) for j in window + later}
     free = set(window) | set(later)
     # Ends of the fixed prefix, in ticks (rounded up: nothing starts before a real end).
     fixed_end = {j: math.ceil(by_task[inst.tasks[j].id].end * scale - 1e-9) for j in prefix}
     release = np.ceil(np.maximum(state.robot_free_at, state.time) * scale - 1e-9).astype(np.int64)
-    for j, tick in fixed_end.items():
+    free_from = np.maximum(state.robot_free_at, state.time).astype(float)  # seconds, for the travel model
+    site = None if state.robot_site is None else state.robot_site.copy()  # where each robot is after the prefix
+    for j in sorted(fixed_end, key=lambda k: (by_task[inst.tasks[k].id].end, k)):
         for name in by_task[inst.tasks[j].id].robots:
             k = inst.robot_index[name]
-            release[k] = max(release[k], tick)
+            release[k] = max(release[k], fixed_end[j])
+            free_from[k] = max(free_from[k], by_task[inst.tasks[j].id].end)
+            if site is not None and inst.travel is not None and state.task_status[j] < TaskStatus.ASSIGNED:
+                site[k] = inst.travel.task_to[j]
     t0 = math.ceil(state.time * scale - 1e-9)
     upper = int(sum(dur.values()) + max([t0, *release.tolist(), *fixed_end.values()]))
+    if inst.travel is not None:  # the incumbent fits: its moves rounded up add under a tick each
+        upper = max(upper, math.ceil(inc.makespan * scale) + len(free) + 2)
     model = cp_model.CpModel()
     start = {j: model.new_int_var(t0, upper, f"S_{j}") for j in free}
     end = {j: start[j] + dur[j] for j in free}
@@ -115,17 +139,39 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
         for p in inst.prerequisites[j]:
             model.add(start[j] >= (end[p] if p in free else fixed_end[p]))
         model.add(makespan >= end[j])
+    if inst.travel is not None:  # the exact expert's travel model, from where the prefix leaves each robot
+        after = state.copy()
+        after.robot_site, after.robot_free_at = site, free_from
+        todo = window + later
+        h = _Horizon(todo, {j: by_task[inst.tasks[j].id].end for j in prefix}, scale, False, dur,
+                     release.tolist(), None, {}, {}, t0, upper)
+        members = dict(member)
+        for j in later:
+            members[j] = {}
+            for name in by_task[inst.tasks[j].id].robots:
+                y = model.new_bool_var(f"fixed_{name}_{j}")
+                model.add(y == 1)
+                members[j][inst.robot_index[name]] = y
+        tv = _add_travel(model, inst, after, h, start, members, makespan)
+        if tv is not None:
+            teams = {j: {inst.robot_index[name] for name in by_task[inst.tasks[j].id].robots} for j in todo}
+            _hint_travel(inst, state, model, tv, inc, teams, h.ticks)
     for intervals in per_robot:
         if len(intervals) > 1:
             model.add_no_overlap(intervals)
     weight = len(free) * (upper + 1) + 1
     model.minimize(weight * makespan + sum(end.values()))
+    model.add_hint(makespan, upper)
     for j in free:  # the incumbent, on the tick scale, as the hint
         model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
     solver = cp_model.CpSolver()
-    solver.parameters.max_time_in_seconds = max(0.01, time_limit)
+    time_limit = solve_by - time.perf_counter()  # the model's building counts against the round's time
+    if time_limit <= 0.01:
+        return None
+    solver.parameters.max_time_in_seconds = time_limit
     solver.parameters.num_workers = workers
     solver.parameters.random_seed = seed
+    solver.parameters.cp_model_probing_level = 0  # a neighbourhood's time goes to search, not to probing
     status = solver.solve(model)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         return None
@@ -153,28 +199,30 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
 
 
 def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,
-            window: int = DEFAULT_WINDOW, workers: int = 1, seed: int = 0,
+            window: int | None = None, workers: int = 1, seed: int = 0,
             round_limit: float = ROUND_LIMIT, bound: float | None = None) -> LNSResult:
     """Improve ``incumbent`` (a valid schedule of ``inst``, from ``state`` when given) by
     large-neighbourhood search within ``time_limit`` seconds (module docstring). Never
     returns a schedule longer than the incumbent; the same seed gives the same windows.
     With a lower ``bound`` (:func:`~lvws_ros.core.bounds.lower_bounds`), it stops when the
-    schedule reaches it (optimal)."""
+    schedule reaches it (optimal). ``window``: tasks per neighbourhood (None: DEFAULT_WINDOW,
+    DEFAULT_WINDOW_TRAVEL with travel)."""
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state
     best = left_shift(inst, incumbent, state)
     first = float(best.makespan)
-    if inst.travel is not None:
-        return LNSResult(best, 0, 0, first, time.perf_counter() - t_start,
-                         "travel: the neighbourhood model has no travel; the incumbent is returned")
+    if window is None:
+        window = DEFAULT_WINDOW if inst.travel is None else DEFAULT_WINDOW_TRAVEL
     if window < 1:
         raise ExpertError(f"lns: the window must hold at least one task, got {window}")
-    scale, _ = _time_scale(np.concatenate([inst.durations, [state.time]]))
+    scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
+    later_windows = LATER if inst.travel is None else LATER_TRAVEL
     rng = np.random.default_rng(seed)
     started = {j for j in range(inst.num_tasks) if state.task_status[j] >= TaskStatus.ASSIGNED}
     rounds = improved = 0
     deadline = t_start + time_limit
-    while (left := deadline - time.perf_counter()) > 0.05:
+    after = 0.0  # the slowest work after a solve so far (left shift, check): kept back from the deadline
+    while (left := deadline - time.perf_counter() - after) > 0.05:
         if bound is not None and best.makespan <= bound + TOLERANCE:
             break  # optimal: nothing left to shorten
         by_task = best.by_task()
@@ -192,9 +240,10 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
             first_at -= 1
         picked = todo[first_at:first_at + window]
         prefix = sorted(started | set(todo[:first_at]))
-        later = todo[first_at + window:first_at + window + LATER * window]
-        cand = _window_model(inst, state, best, prefix, picked, later, scale, min(round_limit, left), workers,
-                             seed + rounds)
+        later = todo[first_at + window:first_at + window + later_windows * window]
+        whole = len(todo) <= window  # the whole rest fits one window: one solve says all, with all the time left
+        solve_by = time.perf_counter() + (left if whole else min(round_limit, left))
+        cand = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers, seed + rounds)
         rounds += 1
 
         if cand is not None and _better(_score(cand), _score(best)):
@@ -203,7 +252,8 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
                                   f"{check_schedule(inst, cand)[0]}")
             best = cand
             improved += 1
-        if len(todo) <= window:  # the whole rest fits one window: one solve says all
+        after = max(after, time.perf_counter() - solve_by)
+        if whole:
             break
     best.policy = incumbent.policy
     return LNSResult(best, rounds, improved, first, time.perf_counter() - t_start)

@@ -1,15 +1,17 @@
 """Large-neighbourhood search: it improves a deliberately bad start on a mid-size cell,
 stays valid by ``lvws check`` (the file round trip included), never returns a longer
-schedule, repeats itself with the same seed, works from a mid-run state, and says why it
-does not search with travel. ``auto`` uses it on a cell too big for CP-SAT's whole model."""
+schedule, repeats itself with the same seed, works from a mid-run state, and with travel
+(the way home included) improves a bad start and stays valid. ``auto`` uses it on a cell
+too big for CP-SAT's whole model, with travel too."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from lvws_ros.core.datasets import DATASETS, dataset_instance, subteam_heavy_instance
+from lvws_ros.core.datasets import subteam_heavy_instance
 from lvws_ros.core.executor import simulate
+from lvws_ros.core.families import family_instance
 from lvws_ros.core.formats import load_schedule, save_schedule
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.errors import ExpertError
@@ -53,19 +55,39 @@ def test_lns_from_a_mid_run_state_keeps_what_has_started():
         assert a.robots == tuple(inst.robots[r].id for r in state.task_team[j])
 
 
-def test_lns_says_why_it_does_not_search_with_travel():
-    inst = dataset_instance(DATASETS["IV"], 0, seed=13)
-    start = simulate(inst, GreedyPayloadPolicy()).schedule
-    found = improve(inst, start, time_limit=1.0)
-    assert found.rounds == 0 and "travel" in found.reason
-    assert found.schedule.makespan <= start.makespan + 1e-9
+@pytest.mark.parametrize("family", ["depot", "traits-return"])
+def test_lns_with_travel_improves_a_bad_start_and_stays_valid(tmp_path, family):
+    inst = family_instance(family, 0, seed=5, num_robots=10, num_tasks=40)
+    assert inst.travel is not None
+    bad = simulate(inst, RandomPolicy(seed=0)).schedule
+    found = improve(inst, bad, time_limit=4.0, window=10, round_limit=0.4)
+    assert found.rounds >= 2 and found.improved >= 1
+    assert found.schedule.makespan < bad.makespan
+    save_schedule(found.schedule, tmp_path / "lns.json")
+    assert check_schedule(inst, load_schedule(tmp_path / "lns.json")) == []
+
+
+def test_lns_with_travel_from_a_mid_run_state():
+    inst = family_instance("depot", 1, seed=5, num_robots=10, num_tasks=40)
+    run = simulate(inst, GreedyPayloadPolicy(), record_states=True)
+    state = run.steps[len(run.steps) // 2].state
+    found = improve(inst, run.schedule, state=state, time_limit=2.0, window=8, round_limit=0.3)
+    assert check_schedule(inst, found.schedule) == []
+    assert found.schedule.makespan <= run.schedule.makespan + 1e-9
+    by_task = found.schedule.by_task()
+    for j in np.flatnonzero(state.task_status >= 2):  # assigned or done: as they were
+        assert by_task[inst.tasks[j].id].robots == tuple(inst.robots[r].id for r in state.task_team[j])
+
+
+def test_lns_refuses_an_empty_window():
     cell = _cell()
     with pytest.raises(ExpertError, match="window"):
         improve(cell, simulate(cell, GreedyPayloadPolicy()).schedule, window=0)
 
 
-def test_auto_searches_neighbourhoods_on_a_cell_too_big_for_the_whole_model():
-    inst = _cell()
+@pytest.mark.parametrize("travel", [False, True])
+def test_auto_searches_neighbourhoods_on_a_cell_too_big_for_the_whole_model(travel):
+    inst = family_instance("depot", 2, seed=5, num_robots=8, num_tasks=30) if travel else _cell()
     auto = AutoPolicy(budget_ms=800.0, exact_tasks=10, samples=2)
     sched = simulate(inst, auto).schedule
     assert check_schedule(inst, sched) == []
