@@ -146,7 +146,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
         t0 = time.perf_counter()
         online.offer_team(convert.team_from_msg(team_msg))
         online.offer_graph(convert.graph_from_msg(graph_msg))
-        d = online.decide()
+        d = online.decide(started=t0)  # the budget counts from the messages' arrival, as in the node
         lat.append(time.perf_counter() - t0)
         for tid, robots in d.assignments if d else ():
             state.start(inst.task_index[tid], [inst.robot_index[r] for r in robots])

@@ -13,7 +13,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -183,6 +183,28 @@ class Policy(Protocol):
     def reset(self, instance: Instance) -> None: ...
 
     def decide(self, state: State) -> Decision: ...
+
+
+@runtime_checkable
+class Budgeted(Protocol):
+    """A policy with a time budget per decision (``budget_ms``; None: no budget). A caller
+    that began the decision's work earlier (the scheduler node: when the message that
+    made the decision due arrived, before converting it) sets ``clock`` to that
+    perf_counter time just before ``decide``, and the budget counts from it."""
+
+    clock: float | None
+
+    @property
+    def budget_ms(self) -> float | None: ...
+
+
+def decision_deadline(policy: Budgeted) -> float | None:
+    """The perf_counter time by which ``policy``'s decision is due: its budget counted from
+    its ``clock`` (then cleared: it holds for one decision) or from now; None without a
+    budget."""
+    start = policy.clock if policy.clock is not None else time.perf_counter()
+    policy.clock = None
+    return None if policy.budget_ms is None else start + policy.budget_ms / 1000
 
 
 @dataclass

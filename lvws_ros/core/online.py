@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, check_decision
+from lvws_ros.core.executor import Budgeted, Decision, Policy, State, TaskStatus, check_decision
 from lvws_ros.core.problem import MAX_VALUE, OBJECTIVES, Instance, Robot, Task
 from lvws_ros.core.subteams import covered, covers
 from lvws_ros.core.travel import Travel, build_travel
@@ -591,8 +591,11 @@ class OnlineScheduler:
                 self.fallback.reset(self._inst)
         return self._inst
 
-    def decide(self) -> OnlineDecision | None:
-        """A decision if one is due (a new free robot or a new ready task), else None."""
+    def decide(self, started: float | None = None) -> OnlineDecision | None:
+        """A decision if one is due (a new free robot or a new ready task), else None.
+        ``started``: the perf_counter time the decision's work began (the scheduler node:
+        when the message that made it due arrived, before its conversion); a policy with a
+        budget (:class:`~lvws_ros.core.executor.Budgeted`) counts it from then."""
         if self.team is None or self.graph is None:
             return None
         inst = self.instance()
@@ -607,7 +610,7 @@ class OnlineScheduler:
         if not (due and free and ready):
             self._seen_free, self._seen_ready = free, ready
             return None
-        decision = self.decide_state(state)  # if it raises, the same state is due again
+        decision = self.decide_state(state, started)  # if it raises, the same state is due again
         for task, robots in decision.assignments:
             self.pending[task] = (robots, now)
         self._seen_free = free - {r for _, team in decision.assignments for r in team}
@@ -627,10 +630,13 @@ class OnlineScheduler:
         assert self.team is not None and self.graph is not None
         return build_instance(self.team, scheduling_view(self.team, self.graph)[0])
 
-    def decide_state(self, state: State) -> OnlineDecision:
-        """Run the policy on ``state`` (checked against Eqs. 8-11) and name the result."""
+    def decide_state(self, state: State, started: float | None = None) -> OnlineDecision:
+        """Run the policy on ``state`` (checked against Eqs. 8-11) and name the result
+        (``started``: as for :meth:`decide`)."""
         inst = state.instance
         t0 = time.perf_counter()
+        if started is not None and isinstance(self.policy, Budgeted):
+            self.policy.clock = started
         decision, used = self._decide_with(state)
         latency = time.perf_counter() - t0
         assigned = {r for _, team in decision.assignments for r in team}

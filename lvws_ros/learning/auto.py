@@ -48,6 +48,7 @@ from lvws_ros.core.executor import (
     SimulationResult,
     State,
     TaskStatus,
+    decision_deadline,
     schedule_from_state,
     simulate,
 )
@@ -87,6 +88,7 @@ class AutoPolicy:
         self.sampler = LVWSSamplePolicy(model_path=model_path, samples=samples, temperature=temperature, seed=seed)
         self.grp = GreedyPayloadPolicy()
         self.budget_ms, self.exact_tasks, self.workers, self.seed = budget_ms, exact_tasks, workers, seed
+        self.clock: float | None = None  # when the next decision's budget starts (core.executor.Budgeted)
         self.plan = FollowedPlan()
         self.proven = False  # the plan followed is a proven optimum (nothing left to improve)
         self.quick_makespan = math.nan  # of the latest quick plan
@@ -198,7 +200,8 @@ class AutoPolicy:
             self.follow_per_task *= 2
 
     def decide(self, state: State) -> Decision:
-        deadline = time.perf_counter() + self.budget_ms / 1000
+        deadline = decision_deadline(self)
+        assert deadline is not None  # auto always has a budget (0: its quick plan alone)
         following = self.plan.follows(state, self.name)
         if following and self.proven:
             return self.plan.pop()

@@ -27,7 +27,16 @@ from typing import Any
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, Policy, State, TaskStatus, advance, final_makespan, simulate
+from lvws_ros.core.executor import (
+    Decision,
+    Policy,
+    State,
+    TaskStatus,
+    advance,
+    decision_deadline,
+    final_makespan,
+    simulate,
+)
 from lvws_ros.core.matching import Match, greedy_match
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
@@ -289,6 +298,7 @@ class LVWSRolloutPolicy:
         self.single_tasks = single_tasks
         self.grp = GreedyPayloadPolicy()
         self.budget_ms = budget_ms
+        self.clock: float | None = None  # when the next decision's budget starts (core.executor.Budgeted)
 
     def reset(self, instance: Instance) -> None:
         self.base.reset(instance)
@@ -332,7 +342,7 @@ class LVWSRolloutPolicy:
         return makespan
 
     def decide(self, state: State) -> Decision:
-        deadline = None if self.budget_ms is None else time.perf_counter() + self.budget_ms / 1000
+        deadline = decision_deadline(self)
         candidates = self.candidates(state, deadline)
         if len(candidates) == 1:
             return candidates[0]

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, State, advance, final_makespan
+from lvws_ros.core.executor import Decision, State, advance, decision_deadline, final_makespan
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import PolicyError
@@ -145,6 +145,7 @@ class LVWSSamplePolicy:
             self.base = LVWSPolicy(model=model, idle_bias=NO_VOLUNTARY_WAIT if idle_bias is None else idle_bias)
         self.samples, self.temperature, self.seed = samples, temperature, seed
         self.budget_ms, self.rounds = budget_ms, rounds
+        self.clock: float | None = None  # when the next decision's budget starts (core.executor.Budgeted)
         self.plan = FollowedPlan()
         self.rng = np.random.default_rng(seed)
         self.searches = 0  # decision steps that sampled (since reset)
@@ -168,7 +169,7 @@ class LVWSSamplePolicy:
             if self.plan.follows(state, self.name):
                 return self.plan.pop()
             return Decision((), tuple(free))
-        deadline = None if self.budget_ms is None else time.perf_counter() + self.budget_ms / 1000
+        deadline = decision_deadline(self)
         if not self.plan.follows(state, self.name):
             self.plan.clear()
         best = self.plan.makespan if self.plan.steps else math.inf

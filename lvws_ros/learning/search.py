@@ -50,6 +50,7 @@ from lvws_ros.core.executor import (
     State,
     advance,
     check_decision,
+    decision_deadline,
     final_makespan,
     plan_step_near,
     simulate,
@@ -146,6 +147,7 @@ class LVWSBeamPolicy:
             raise PolicyError(f"lvws_beam: the beam width must be at least 1, got {width}")
         self.rollout = LVWSRolloutPolicy(model=model, model_path=model_path, single_tasks=True)
         self.width, self.budget_ms = width, budget_ms
+        self.clock: float | None = None  # when the next decision's budget starts (core.executor.Budgeted)
         self.plan = FollowedPlan()
         self.planned_makespan = math.nan  # of the schedule the latest search found (nan: none)
         self.searches = 0  # searches run since reset (1 when the world followed the plan)
@@ -184,7 +186,7 @@ class LVWSBeamPolicy:
     def search(self, state: State) -> list[PlannedStep]:
         """The decisions, from ``state`` to the end, of the shortest schedule the search
         finds (empty if the budget was spent before any)."""
-        deadline = None if self.budget_ms is None else time.perf_counter() + self.budget_ms / 1000
+        deadline = decision_deadline(self)
         best, best_plan = math.inf, []
         beam: list[tuple[State, list[PlannedStep]]] = [(state.copy(), [])]
         try:

@@ -248,6 +248,7 @@ class SchedulerNode(LifecycleNode):
         self.rejected: dict[str, str] = {}  # message kind -> why its latest one was ignored
         self.last_latency = 0.0
         self.received = 0
+        self.arrived = self.decided_at = 0.0  # perf_counter: the latest message's arrival, the latest decision's end
         if not values["managed"]:
             self.trigger_configure()
             if self.core is None:
@@ -340,10 +341,12 @@ class SchedulerNode(LifecycleNode):
 
     def on_team(self, msg: TeamState) -> None:
         self.received += 1
+        self.arrived = time.perf_counter()
         self.take("TeamState", lambda core: core.offer_team(convert.team_from_msg(msg)))
 
     def on_graph(self, msg: TaskGraph) -> None:
         self.received += 1
+        self.arrived = time.perf_counter()
         self.take("TaskGraph", lambda core: core.offer_graph(convert.graph_from_msg(msg)))
 
     def take(self, kind: str, offer: Callable[[OnlineScheduler], bool]) -> None:
@@ -396,7 +399,9 @@ class SchedulerNode(LifecycleNode):
         team, graph = self.core.team, self.core.graph
         if team is not None and graph is not None and abs(team.stamp - graph.stamp) < 1e-9:
             self.unsynced_since = None
-            self.step()
+            # The budget counts from the arrival of the message that made the decision due
+            # (its conversion included), or from the end of the decision it waited for.
+            self.step(max(self.arrived, self.decided_at))
         elif self.unsynced_since is None:
             self.unsynced_since = time.monotonic()
 
@@ -413,8 +418,9 @@ class SchedulerNode(LifecycleNode):
             return True
         return time.monotonic() - self.started_at > SUBSCRIBER_WAIT
 
-    def step(self) -> None:
-        """Start a decision on the worker thread (:meth:`on_decided` publishes it)."""
+    def step(self, started: float | None = None) -> None:
+        """Start a decision on the worker thread (:meth:`on_decided` publishes it); a
+        budget counts from ``started`` (a perf_counter time; None: from now)."""
         if not self.audience_ready():
             self.unsynced_since = time.monotonic()  # on_settle tries again
             return
@@ -424,12 +430,13 @@ class SchedulerNode(LifecycleNode):
             self.deferred.append(self.maybe_step)
             return
         self.deciding_core = self.core
-        self.in_flight = self.worker.submit(self.core.decide)
+        self.in_flight = self.worker.submit(self.core.decide, started)
         self.in_flight.add_done_callback(lambda _done: self.decided.trigger())
 
     def on_decided(self) -> None:
         """The decision is made: publish it, then apply what arrived meanwhile, in order."""
         done, self.in_flight = self.in_flight, None
+        self.decided_at = time.perf_counter()
         if done is None or not done.done():
             self.in_flight = done
             return

@@ -4,10 +4,12 @@ never assigns a busy robot or an unready task whatever order messages come in.""
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import pytest
 
 from conftest import CASE_STUDY
+from lvws_ros.core.executor import Budgeted, decision_deadline
 from lvws_ros.core.online import OnlineScheduler, RobotInfo, TaskInfo
 from lvws_ros.errors import InstanceError, PolicyError
 from lvws_ros.registry import make_policy
@@ -298,3 +300,24 @@ def test_tasks_the_robots_present_cannot_cover_are_held_back_and_come_back():
     d2 = online.decide()
     assert d2 is not None and ("lift0", ("l",)) in d2.assignments
     assert any("robot(s) l joined the team" in c for c in online.changes)
+
+
+def test_a_budget_counts_from_when_the_decision_began():
+    # lvws_sample with 200 ms per decision: told that the decision's work began 10 s ago
+    # (the node: the message's arrival), its budget is spent and it decides as LVWS alone;
+    # told nothing, it samples; the clock holds for one decision only.
+    sim = CellSim(load_cell_config(CASE_STUDY))
+    policy = make_policy("lvws_sample", budget_ms=200.0)
+    assert isinstance(policy, Budgeted)
+    online = OnlineScheduler(policy)
+    online.offer_team(sim.team_snapshot())
+    online.offer_graph(sim.graph_snapshot())
+    t0 = time.perf_counter()
+    d = online.decide(started=t0 - 10.0)
+    assert d is not None and policy.fallbacks == 1 and time.perf_counter() - t0 < 0.2
+    assert policy.clock is None
+    policy.clock = later = time.perf_counter() + 5.0  # counted from a later time
+    assert decision_deadline(policy) == pytest.approx(later + 0.2)
+    assert policy.clock is None
+    policy.budget_ms = None
+    assert decision_deadline(policy) is None
