@@ -99,6 +99,7 @@ class AutoPolicy:
         self.follow_per_task = FOLLOW_SECONDS_PER_TASK  # turning an LNS schedule into steps (measured)
         self.lns_windows = 0  # neighbourhoods the large-neighbourhood search solved
         self.sampling_fits = True  # LVWS's quick plan finished within the budget (else neither would a sample)
+        self.sample_per_task = 0.0  # seconds per sampled schedule per task to do (measured; sizes sampling rounds)
         self._schedule: Schedule | None = None  # the plan's whole schedule (CP-SAT's warm start)
         self.unimproved = 0  # searches in a row that did not shorten the plan
         self.skip = 0  # steps left to follow the plan without searching
@@ -116,6 +117,7 @@ class AutoPolicy:
         self.improved = {"exact": 0, "lns": 0, "sample": 0}
         self.unplannable = math.inf
         self.sampling_fits = True
+        self.sample_per_task = 0.0
         self.lns_windows = 0
         self.unimproved = self.skip = self.skipped = 0
 
@@ -219,7 +221,10 @@ class AutoPolicy:
                 return self.grp.decide(state)
             self.plans += 1
             limit = None if self.budget_ms == 0 else deadline  # budget 0: the quick plan alone, however long
-            quick = self._finish(self.grp, state, limit), self._finish(self.sampler.base, state, limit)
+            quick_grp = self._finish(self.grp, state, limit)
+            t0 = time.perf_counter()
+            quick = quick_grp, self._finish(self.sampler.base, state, limit)
+            self.sample_per_task = (time.perf_counter() - t0) / max(1, todo)  # a sample costs as much
             for res in quick:
                 if res is not None:
                     self._offer_run(state, res)
@@ -230,16 +235,17 @@ class AutoPolicy:
         before = self.plan.makespan if self.plan.steps else math.inf
         if time.perf_counter() < deadline:
             self._exact(state, deadline)
-        one = math.inf  # seconds per sampled schedule in the latest round: rounds sized to the time left
+        todo = _to_do(state)
+        one = self.sample_per_task * todo  # seconds per sampled schedule (so far): rounds sized to the time left
         while not self.proven and self.sampling_fits and self.sampler.temperature > 0 \
                 and (t0 := time.perf_counter()) < deadline:
-            if math.isfinite(one) and deadline - t0 < one:  # not even one schedule would finish in time
+            if deadline - t0 < one:  # not even one schedule would finish in time
                 break
-            count = self.sampler.samples if not math.isfinite(one) else \
-                min(self.sampler.samples, max(1, int((deadline - t0) / max(one, 1e-6))))
+            count = min(self.sampler.samples, max(1, int((deadline - t0) / max(one, 1e-6))))
             found = sample_schedules(self.sampler.base, state, count, self.sampler.temperature, self.rng,
                                      deadline=deadline)
             one = (time.perf_counter() - t0) / count
+            self.sample_per_task = one / max(1, todo)
             for s in found:
                 final = s.final
                 if self._offer(state, s.makespan, s.steps, partial(schedule_from_state, final, self.name)):

@@ -102,7 +102,8 @@ PARAMETERS: dict[str, Param] = {
     "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (auto, lvws_sample, "
                                             "lvws_rollout, lvws_beam, exact) in ms; 0: their own limits "
                                             f"(auto: {AUTO_BUDGET_MS:g} ms, lvws_beam: {BEAM_BUDGET_MS:g} ms, "
-                                            f"lvws_sample: {SAMPLE_BUDGET_MS:g} ms)",
+                                            f"lvws_sample: {SAMPLE_BUDGET_MS:g} ms); counted from the arrival of "
+                                            "the message that made the decision due",
                                 0.0, 3.6e6),
     "samples": Param(int, 0, "lvws_sample: schedules sampled in lockstep per round; 0: the sampler's default "
                              "(lvws_ros/learning/sampling.py)", 0, MAX_SAMPLES),
