@@ -635,9 +635,14 @@ class OnlineScheduler:
         (``started``: as for :meth:`decide`)."""
         inst = state.instance
         t0 = time.perf_counter()
-        if started is not None and isinstance(self.policy, Budgeted):
-            self.policy.clock = started
-        decision, used = self._decide_with(state)
+        budgeted = self.policy if isinstance(self.policy, Budgeted) else None
+        if budgeted is not None:
+            budgeted.clock = started  # None: from when it decides
+        try:
+            decision, used = self._decide_with(state)
+        finally:
+            if budgeted is not None:  # for this decision only, whether or not the policy read it
+                budgeted.clock = None
         latency = time.perf_counter() - t0
         assigned = {r for _, team in decision.assignments for r in team}
         out = OnlineDecision(

@@ -204,6 +204,7 @@ class AutoPolicy:
     def decide(self, state: State) -> Decision:
         deadline = decision_deadline(self)
         assert deadline is not None  # auto always has a budget (0: its quick plan alone)
+        late = time.perf_counter() >= deadline  # the budget was spent before the step came here
         following = self.plan.follows(state, self.name)
         if following and self.proven:
             return self.plan.pop()
@@ -230,7 +231,7 @@ class AutoPolicy:
                     self._offer_run(state, res)
             self.sampling_fits = quick[1] is not None
             self.quick_makespan = self.plan.makespan if self.plan.steps else math.nan
-            if not self.plan.steps:
+            if not self.plan.steps and not late:
                 self.unplannable = todo // 2  # try again when half as many tasks are left
         before = self.plan.makespan if self.plan.steps else math.inf
         if time.perf_counter() < deadline:
@@ -244,8 +245,9 @@ class AutoPolicy:
             count = min(self.sampler.samples, max(1, int((deadline - t0) / max(one, 1e-6))))
             found = sample_schedules(self.sampler.base, state, count, self.sampler.temperature, self.rng,
                                      deadline=deadline)
-            one = (time.perf_counter() - t0) / count
-            self.sample_per_task = one / max(1, todo)
+            if time.perf_counter() <= deadline:  # a whole round: its time per schedule
+                one = (time.perf_counter() - t0) / count
+                self.sample_per_task = one / max(1, todo)
             for s in found:
                 final = s.final
                 if self._offer(state, s.makespan, s.steps, partial(schedule_from_state, final, self.name)):

@@ -88,18 +88,20 @@ def _better(a: tuple[float, float], b: tuple[float, float]) -> bool:
 
 
 def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int], window: list[int],
-                  later: list[int], scale: int, solve_by: float, workers: int, seed: int) -> Schedule | None:
+                  later: list[int], scale: int, solve_by: float, workers: int,
+                  seed: int) -> tuple[Schedule | None, bool]:
     """One neighbourhood: the window's subteams and starts free, the later tasks' subteams
     and per-robot orders fixed, the prefix as it is (tasks after ``later`` are not in the
     model: the left shift places them); the left-shifted solution (None: none found by
-    ``solve_by``, a perf_counter value the building of the model counts against)."""
+    ``solve_by``, a perf_counter value the building of the model counts against), and
+    whether the solver ran at all (False: the model's building took the round's time)."""
     by_task = inc.by_task()
     dur = {j: max(1, round(float(inst.durations[j]) * scale)) for j in window + later}
     free = set(window) | set(later)
     # Ends of the fixed prefix, in ticks (rounded up: nothing starts before a real end).
     fixed_end = {j: math.ceil(by_task[inst.tasks[j].id].end * scale - 1e-9) for j in prefix}
     release = np.ceil(np.maximum(state.robot_free_at, state.time) * scale - 1e-9).astype(np.int64)
-    free_from = np.maximum(state.robot_free_at, state.time).astype(float)  # seconds, for the travel model
+    free_from = state.robot_free_at.astype(float)  # when each robot's last task ends (seconds; the way home)
     site = None if state.robot_site is None else state.robot_site.copy()  # where each robot is after the prefix
     for j in sorted(fixed_end, key=lambda k: (by_task[inst.tasks[k].id].end, k)):
         for name in by_task[inst.tasks[j].id].robots:
@@ -167,14 +169,14 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     solver = cp_model.CpSolver()
     time_limit = solve_by - time.perf_counter()  # the model's building counts against the round's time
     if time_limit <= 0.01:
-        return None
+        return None, False
     solver.parameters.max_time_in_seconds = time_limit
     solver.parameters.num_workers = workers
     solver.parameters.random_seed = seed
     solver.parameters.cp_model_probing_level = 0  # a neighbourhood's time goes to search, not to probing
     status = solver.solve(model)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        return None
+        return None, True
     # The left shift keeps each robot's order by start: the tasks after the model go after
     # every task in it, in their own order (a common offset), as they did in the incumbent.
     fixed = set(prefix)
@@ -195,7 +197,7 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
             robots = by_task[t.id].robots
         s0 = solver.value(start[j]) / scale
         out.append(Assignment(t.id, robots, s0, s0 + t.duration))
-    return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state)
+    return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), True
 
 
 def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,
@@ -221,7 +223,8 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     started = {j for j in range(inst.num_tasks) if state.task_status[j] >= TaskStatus.ASSIGNED}
     rounds = improved = 0
     deadline = t_start + time_limit
-    after = 0.0  # the slowest work after a solve so far (left shift, check): kept back from the deadline
+    after = 0.0  # the longest a round ran past its solve_by so far (a left shift and check after the solve, or
+    # a model's building that took the round's time): kept back from the deadline
     while (left := deadline - time.perf_counter() - after) > 0.05:
         if bound is not None and best.makespan <= bound + TOLERANCE:
             break  # optimal: nothing left to shorten
@@ -243,8 +246,9 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         later = todo[first_at + window:first_at + window + later_windows * window]
         whole = len(todo) <= window  # the whole rest fits one window: one solve says all, with all the time left
         solve_by = time.perf_counter() + (left if whole else min(round_limit, left))
-        cand = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers, seed + rounds)
-        rounds += 1
+        cand, solved = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers,
+                                     seed + rounds)
+        rounds += solved
 
         if cand is not None and _better(_score(cand), _score(best)):
             if check_schedule(inst, cand):

@@ -102,8 +102,9 @@ PARAMETERS: dict[str, Param] = {
     "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (auto, lvws_sample, "
                                             "lvws_rollout, lvws_beam, exact) in ms; 0: their own limits "
                                             f"(auto: {AUTO_BUDGET_MS:g} ms, lvws_beam: {BEAM_BUDGET_MS:g} ms, "
-                                            f"lvws_sample: {SAMPLE_BUDGET_MS:g} ms); counted from the arrival of "
-                                            "the message that made the decision due",
+                                            f"lvws_sample: {SAMPLE_BUDGET_MS:g} ms); auto, lvws_sample, lvws_rollout "
+                                            "and lvws_beam count it from the arrival of the message that made the "
+                                            "decision due",
                                 0.0, 3.6e6),
     "samples": Param(int, 0, "lvws_sample: schedules sampled in lockstep per round; 0: the sampler's default "
                              "(lvws_ros/learning/sampling.py)", 0, MAX_SAMPLES),
@@ -284,6 +285,7 @@ class SchedulerNode(LifecycleNode):
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.active = True
+        self.arrived = self.decided_at = time.perf_counter()  # what came before waited for this: a budget from now
         self.report(DiagnosticStatus.OK, "active: deciding")
         self.when_idle(lambda: self.guarded(self.maybe_step))
         return super().on_activate(state)

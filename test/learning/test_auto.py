@@ -4,11 +4,14 @@ within a second or two, valid with travel, and replanning when the world departs
 
 from __future__ import annotations
 
+import math
+import time
+
 import numpy as np
 import pytest
 
 from lvws_ros.core.datasets import DATASETS, dataset_instance, random_instance
-from lvws_ros.core.executor import check_decision, simulate
+from lvws_ros.core.executor import State, check_decision, simulate
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import PolicyError
 from lvws_ros.learning.auto import AutoPolicy
@@ -102,3 +105,19 @@ def test_after_searches_that_do_not_pay_auto_follows_its_plan_between_fewer_sear
     steps = len(res.steps)
     assert steps > 4 * SEARCH_PATIENCE and auto.skipped > 0
     assert auto.skipped < steps  # it searched on some steps
+
+
+def test_a_budget_spent_before_the_step_costs_that_step_only():
+    # The node counts a budget from the message's arrival; if it was spent before the step
+    # came to auto (a stale clock), that step is GRP's, and the next one plans again.
+    inst = dataset_instance(DATASETS["I"], 0, seed=13)
+    auto = AutoPolicy(budget_ms=150.0)
+    auto.reset(inst)
+    state = State.initial(inst)
+    auto.clock = time.perf_counter() - 5.0
+    first = auto.decide(state)
+    check_decision(state, first, auto.name)
+    assert auto.fallbacks == 1 and auto.unplannable == math.inf and auto.clock is None
+    auto.reset(inst)
+    auto.decide(state)  # counted from now: a quick plan fits
+    assert auto.fallbacks == 0 and auto.plans == 1

@@ -6,6 +6,8 @@ too big for CP-SAT's whole model, with travel too."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -17,7 +19,8 @@ from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.errors import ExpertError
 from lvws_ros.learning.auto import AutoPolicy
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomPolicy
-from lvws_ros.policies.lns import improve
+from lvws_ros.policies.exact import _time_scale, _travel_times, left_shift
+from lvws_ros.policies.lns import _window_model, improve
 
 
 def _cell():
@@ -116,3 +119,20 @@ def test_lns_from_a_state_that_ran_ahead_of_the_plan():
     by_task = found.schedule.by_task()
     for j in np.flatnonzero(state.task_status >= 2):  # what has started is as the world has it
         assert by_task[inst.tasks[j].id].start == pytest.approx(state.task_start[j])
+
+
+@pytest.mark.parametrize("index", [9, 21, 22])
+def test_a_late_window_with_the_way_home_holds_its_incumbent(index):
+    # From a late state of a cell with "objective": "return", a robot given nothing more
+    # goes home from where its last task ended, when it ended (not from now): the window
+    # over the rest of the schedule holds the incumbent, so CP-SAT finds a schedule.
+    inst = family_instance("traits-return", index, seed=3, num_robots=6, num_tasks=10)
+    run = simulate(inst, RandomPolicy(seed=index), record_states=True)
+    state = run.steps[9].state
+    inc = left_shift(inst, run.schedule, state)
+    started = [j for j in range(inst.num_tasks) if state.task_status[j] >= 2]
+    rest = sorted(set(range(inst.num_tasks)) - set(started), key=lambda j: (inc.by_task()[inst.tasks[j].id].start, j))
+    scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
+    cand, solved = _window_model(inst, state, inc, started, rest, [], scale, time.perf_counter() + 5.0, 1, 0)
+    assert solved and cand is not None
+    assert check_schedule(inst, cand) == [] and cand.makespan <= inc.makespan + 1e-9
