@@ -212,11 +212,11 @@ class AutoPolicy:
             self.skip -= 1
             self.skipped += 1
             return self.plan.pop()
+        todo = _to_do(state)
         if not following:
             self.plan.clear()
             self.proven = False
             self.unimproved = self.skip = 0
-            todo = _to_do(state)
             if todo > self.unplannable:  # no quick plan fitted the budget at this size: GRP's step at once
                 self.fallbacks += 1
                 return self.grp.decide(state)
@@ -236,7 +236,6 @@ class AutoPolicy:
         before = self.plan.makespan if self.plan.steps else math.inf
         if time.perf_counter() < deadline:
             self._exact(state, deadline)
-        todo = _to_do(state)
         one = self.sample_per_task * todo  # seconds per sampled schedule (so far): rounds sized to the time left
         while not self.proven and self.sampling_fits and self.sampler.temperature > 0 \
                 and (t0 := time.perf_counter()) < deadline:

@@ -288,7 +288,7 @@ def _hint_travel(inst: Instance, state: State, model: cp_model.CpModel, tv: _Tra
         if inst.tasks[j].id in leave:
             model.add_hint(d, ticks(leave[inst.tasks[j].id]))
     for r, named in tv.arcs.items():
-        mine = {j for pair in named for j in pair if j is not None}
+        mine = [j for a, j in named if a is None and j is not None]  # the tasks in the robot's circuit
         order = sorted((j for j in mine if r in teams.get(j, ())), key=lambda j: (by_task[inst.tasks[j].id].start, j))
         used = set(zip([None, *order], [*order, None], strict=True)) if order else {(None, None)}
         for pair, lit in named.items():

@@ -100,16 +100,17 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     free = set(window) | set(later)
     # Ends of the fixed prefix, in ticks (rounded up: nothing starts before a real end).
     fixed_end = {j: math.ceil(by_task[inst.tasks[j].id].end * scale - 1e-9) for j in prefix}
-    release = np.ceil(np.maximum(state.robot_free_at, state.time) * scale - 1e-9).astype(np.int64)
+    incumbent_team = {j: [inst.robot_index[name] for name in by_task[inst.tasks[j].id].robots]
+                      for j in [*prefix, *free]}
     free_from = state.robot_free_at.astype(float)  # when each robot's last task ends (seconds; the way home)
     site = None if state.robot_site is None else state.robot_site.copy()  # where each robot is after the prefix
-    for j in sorted(fixed_end, key=lambda k: (by_task[inst.tasks[k].id].end, k)):
-        for name in by_task[inst.tasks[j].id].robots:
-            k = inst.robot_index[name]
-            release[k] = max(release[k], fixed_end[j])
+    for j in sorted(prefix, key=lambda k: (by_task[inst.tasks[k].id].end, k)):
+        for k in incumbent_team[j]:
             free_from[k] = max(free_from[k], by_task[inst.tasks[j].id].end)
             if site is not None and inst.travel is not None and state.task_status[j] < TaskStatus.ASSIGNED:
                 site[k] = inst.travel.task_to[j]
+    # When each robot is free for the window, in ticks (rounded up, as the prefix's ends).
+    release = np.ceil(np.maximum(free_from, state.time) * scale - 1e-9).astype(np.int64)
     t0 = math.ceil(state.time * scale - 1e-9)
     upper = int(sum(dur.values()) + max([t0, *release.tolist(), *fixed_end.values()]))
     if inst.travel is not None:  # the incumbent fits: its moves rounded up add under a tick each
@@ -123,15 +124,13 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     member: dict[int, dict[int, cp_model.IntVar]] = {}
     for j in window:
         member[j] = covering_members(model, inst, j, pay_int, need_int)
-        hinted = {inst.robot_index[r] for r in by_task[inst.tasks[j].id].robots}
         for r, y in member[j].items():
             per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
             model.add(start[j] >= int(release[r])).only_enforce_if(y)
-            model.add_hint(y, r in hinted)
+            model.add_hint(y, r in incumbent_team[j])
     last: dict[int, int] = {}  # robot -> its latest later task so far (per-robot order kept)
     for j in sorted(later, key=lambda k: (by_task[inst.tasks[k].id].start, k)):
-        for name in by_task[inst.tasks[j].id].robots:
-            r = inst.robot_index[name]
+        for r in incumbent_team[j]:
             per_robot[r].append(model.new_fixed_size_interval_var(start[j], dur[j], f"I_{r}_{j}"))
             model.add(start[j] >= int(release[r]))
             if r in last:
@@ -148,16 +147,11 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
         h = _Horizon(todo, {j: by_task[inst.tasks[j].id].end for j in prefix}, scale, False, dur,
                      release.tolist(), None, {}, {}, t0, upper)
         members = dict(member)
-        for j in later:
-            members[j] = {}
-            for name in by_task[inst.tasks[j].id].robots:
-                y = model.new_bool_var(f"fixed_{name}_{j}")
-                model.add(y == 1)
-                members[j][inst.robot_index[name]] = y
+        for j in later:  # their subteams fixed: members that must be there
+            members[j] = {r: model.new_constant(1) for r in incumbent_team[j]}
         tv = _add_travel(model, inst, after, h, start, members, makespan)
         if tv is not None:
-            teams = {j: {inst.robot_index[name] for name in by_task[inst.tasks[j].id].robots} for j in todo}
-            _hint_travel(inst, state, model, tv, inc, teams, h.ticks)
+            _hint_travel(inst, state, model, tv, inc, {j: set(incumbent_team[j]) for j in todo}, h.ticks)
     for intervals in per_robot:
         if len(intervals) > 1:
             model.add_no_overlap(intervals)
