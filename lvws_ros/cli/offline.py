@@ -92,8 +92,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(f"lvws_sample: seed {args.seed}", file=sys.stderr)
     if args.policy == "auto":
         improved = getattr(policy, "improved", {})
-        print(f"auto: quick plan {getattr(policy, 'quick_makespan', float('nan')):g}, improved by CP-SAT "
-              f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)} and by sampling "
+        print(f"auto: quick plan {getattr(policy, 'quick_makespan', float('nan')):g}, improved by a quick plan "
+              f"made later {improved.get('quick', 0)}, by CP-SAT {improved.get('exact', 0)}, "
+              f"by large-neighbourhood search {improved.get('lns', 0)} and by sampling "
               f"{improved.get('sample', 0)} times; "
               f"{'proven optimal' if getattr(policy, 'proven', False) else 'not proven optimal'}; seed {args.seed}",
               file=sys.stderr)

@@ -3,8 +3,10 @@
 A user should not need to know which policy suits which cell. At a decision step with no
 plan to follow, ``auto``
 
-1. makes the quick plans: GRP's and LVWS's whole schedules from the state (each a
-   finish, under the budget), and takes the shorter;
+1. makes the quick plans: GRP's, LVWS's and GRP's with the ready tasks taken longest
+   path to the end first (``priority="critical-path"``) whole schedules from the state
+   (each a finish, under the budget, in that order), and takes the shortest; a GRP plan
+   the budget cut is made at the next step's search, from the state then (once);
 2. improves it while the budget lasts: CP-SAT from the state, warm-started from the
    incumbent (for a cell of at most ``exact_tasks`` tasks still to do; a proof of
    optimality ends the search for the run) or, for a bigger cell (with travel too),
@@ -87,6 +89,8 @@ class AutoPolicy:
             raise PolicyError(f"auto: the budget must be a finite number of ms >= 0, got {budget_ms}")
         self.sampler = LVWSSamplePolicy(model_path=model_path, samples=samples, temperature=temperature, seed=seed)
         self.grp = GreedyPayloadPolicy()
+        self.quick_plans = (self.grp, self.sampler.base, GreedyPayloadPolicy(priority="critical-path"))
+        self.retry: list[Policy] = []  # GRP plans the budget cut, made at the next search
         self.budget_ms, self.exact_tasks, self.workers, self.seed = budget_ms, exact_tasks, workers, seed
         self.clock: float | None = None  # when the next decision's budget starts (core.executor.Budgeted)
         self.plan = FollowedPlan()
@@ -94,7 +98,7 @@ class AutoPolicy:
         self.quick_makespan = math.nan  # of the latest quick plan
         self.rng = np.random.default_rng(seed)
         self.plans = self.fallbacks = 0  # plans made afresh; steps decided by GRP alone (no plan in the budget)
-        self.improved = {"exact": 0, "lns": 0, "sample": 0}  # times each improver shortened the plan
+        self.improved = {"quick": 0, "exact": 0, "lns": 0, "sample": 0}  # times each improver shortened the plan
         self.unplannable = math.inf  # more tasks to do than this: no quick plan is tried (none fitted the budget)
         self.follow_per_task = FOLLOW_SECONDS_PER_TASK  # turning an LNS schedule into steps (measured)
         self.lns_windows = 0  # neighbourhoods the large-neighbourhood search solved
@@ -114,8 +118,9 @@ class AutoPolicy:
         self.quick_makespan = math.nan
         self.rng = np.random.default_rng(self.seed)
         self.plans = self.fallbacks = 0
-        self.improved = {"exact": 0, "lns": 0, "sample": 0}
+        self.improved = {"quick": 0, "exact": 0, "lns": 0, "sample": 0}
         self.unplannable = math.inf
+        self.retry = []
         self.sampling_fits = True
         self.sample_per_task = 0.0
         self.lns_windows = 0
@@ -222,18 +227,25 @@ class AutoPolicy:
                 return self.grp.decide(state)
             self.plans += 1
             limit = None if self.budget_ms == 0 else deadline  # budget 0: the quick plan alone, however long
-            quick_grp = self._finish(self.grp, state, limit)
-            t0 = time.perf_counter()
-            quick = quick_grp, self._finish(self.sampler.base, state, limit)
-            self.sample_per_task = (time.perf_counter() - t0) / max(1, todo)  # a sample costs as much
-            for res in quick:
+            self.retry = []
+            for policy in self.quick_plans:
+                t0 = time.perf_counter()
+                res = self._finish(policy, state, limit)
+                if policy is self.sampler.base:
+                    self.sample_per_task = (time.perf_counter() - t0) / max(1, todo)  # a sample costs as much
+                    self.sampling_fits = res is not None
                 if res is not None:
                     self._offer_run(state, res)
-            self.sampling_fits = quick[1] is not None
+                elif policy is not self.sampler.base:
+                    self.retry.append(policy)
             self.quick_makespan = self.plan.makespan if self.plan.steps else math.nan
             if not self.plan.steps and not late:
                 self.unplannable = todo // 2  # try again when half as many tasks are left
         before = self.plan.makespan if self.plan.steps else math.inf
+        while following and self.retry and time.perf_counter() < deadline:  # a GRP plan the budget cut, once
+            res = self._finish(self.retry.pop(0), state, deadline)
+            if res is not None and self._offer_run(state, res):
+                self.improved["quick"] += 1
         if time.perf_counter() < deadline:
             self._exact(state, deadline)
         one = self.sample_per_task * todo  # seconds per sampled schedule (so far): rounds sized to the time left

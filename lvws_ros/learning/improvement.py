@@ -32,8 +32,6 @@ best candidate is LVWS's own schedule is not labelled (it would teach what LVWS 
 from __future__ import annotations
 
 import copy
-import hashlib
-import json
 import math
 import statistics
 import time
@@ -56,7 +54,7 @@ from lvws_ros.learning.features import InstanceFeatures
 from lvws_ros.learning.gatn import GATN, GATNConfig
 from lvws_ros.learning.policies import LVWSPolicy
 from lvws_ros.learning.sampling import DEFAULT_TEMPERATURE, sample_schedules
-from lvws_ros.learning.training import TrainConfig, train
+from lvws_ros.learning.training import TrainConfig, train, validation_makespans
 
 LARGE_ROBOTS = (20, 60)
 LARGE_TASKS = (50, 200)
@@ -183,27 +181,12 @@ def _round_job(args: tuple[Instance, dict[str, Any], dict[str, Any], float, dict
     return demos, {**best, "chosen": float(KINDS.index(chosen.kind))}
 
 
-def validation_optima(instances: Sequence[Instance], time_limit: float, cache: Path | None,
+def validation_optima(instances: Sequence[Instance], time_limit: float, cache_dir: str | Path | None,
                       log: Callable[[str], None]) -> dict[str, float]:
     """Proven optima of the validation instances (those CP-SAT proves within
-    ``time_limit``; the others are left out of the score), cached in ``cache``."""
-    from lvws_ros.policies.exact import solve_exact
-
-    known: dict[str, Any] = json.loads(cache.read_text()) if cache is not None and cache.is_file() else {}
-    t0 = time.perf_counter()
-    for inst in instances:
-        key = instance_key(inst)
-        if key not in known:
-            res = solve_exact(inst, workers=8, time_limit=time_limit)
-            known[key] = {"makespan": res.makespan, "proven": res.proven}
-            if cache is not None:
-                cache.parent.mkdir(parents=True, exist_ok=True)
-                cache.write_text(json.dumps(known))
-    proven = {k: float(v["makespan"]) for k, v in known.items() if v["proven"]}
-    wanted = {instance_key(i) for i in instances}
-    out = {k: v for k, v in proven.items() if k in wanted}
-    log(f"validation: {len(out)} of {len(instances)} optima proven ({time.perf_counter() - t0:.0f} s)")
-    return out
+    ``time_limit``; the others are left out of the score), kept in ``cache_dir``."""
+    return {k: makespan for k, (makespan, proven) in
+            validation_makespans(instances, time_limit, 8, cache_dir, log).items() if proven}
 
 
 def validation_score(model: GATN, instances: Sequence[Instance], optima: dict[str, float], idle_bias: float) -> float:
@@ -225,9 +208,7 @@ def improve(init: str | Path, train_set: Sequence[Instance], val_set: Sequence[I
                           "not supported")
     idle_bias = float(meta.get("idle_bias", 0.0))
     state_path = Path(out).with_suffix(".improve.pt")
-    digest = hashlib.sha256("".join(instance_key(i) for i in val_set).encode()).hexdigest()[:12]
-    optima = validation_optima(val_set, cfg.validation_time_limit,
-                               Path(cache_dir) / f"optima-{digest}.json" if cache_dir else None, log)
+    optima = validation_optima(val_set, cfg.validation_time_limit, cache_dir, log)
     if not train_set:
         raise ConfigError("self-improvement: no training instances (give datasets, families, --instances or --large)")
     if not optima:

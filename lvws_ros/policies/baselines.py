@@ -4,7 +4,13 @@
   random minimal subteam only when no single robot can do the task.
 * ``rand_subteam``: a random choice among all minimal covering robots and subteams.
 * ``grp``: the robot or subteam with the smallest total payload that meets the task's
-  requirements (ties: fewer robots, then lower robot indices).
+  requirements (ties: fewer robots, then lower robot indices), the ready tasks taken in
+  index order (the paper's). With ``priority="critical-path"`` (ours, beyond the paper;
+  one of ``auto``'s quick plans) the ready tasks are taken longest path to the end first
+  (the task's duration plus its longest chain of successors,
+  :attr:`~lvws_ros.core.problem.Instance.critical_tail`; ties: lower index), the
+  classic priority rule of list scheduling: the tasks that hold up the most work start
+  first.
 
 All are work-conserving: they start every ready task for which free robots suffice.
 With travel (the travel extension of formats.md), a robot that can never reach a task (a
@@ -26,6 +32,7 @@ import numpy.typing as npt
 from lvws_ros.core.executor import Decision, State, TaskStatus
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import AmountArray, FloatArray, covered, covers_alone, lightest_cover, random_cover
+from lvws_ros.errors import PolicyError
 
 
 class _SequentialPolicy:
@@ -42,7 +49,7 @@ class _SequentialPolicy:
     def reset(self, instance: Instance) -> None:
         self.rng = np.random.default_rng(self.seed)
 
-    def order(self, ready: list[int]) -> list[int]:
+    def order(self, inst: Instance, ready: list[int]) -> list[int]:
         return ready
 
     def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
@@ -64,7 +71,7 @@ class _SequentialPolicy:
         inst = state.instance
         self.traits_from = len(inst.capabilities) if inst.traits else None
         free = np.array(state.free_robots(), dtype=np.int64)
-        order = np.array(self.order(state.ready_tasks()), dtype=np.int64)
+        order = np.array(self.order(inst, state.ready_tasks()), dtype=np.int64)
         out = []
         # tasks the free robots together can cover, all at once (a subset covers no more)
         possible = covered(inst.robot_amounts[free].sum(axis=0), inst.robot_payload[free].sum(),
@@ -91,12 +98,24 @@ class _SequentialPolicy:
         return Decision(tuple(out), tuple(int(i) for i in free))
 
 
+PRIORITIES = ("index", "critical-path")  # the order in which GRP takes the ready tasks
+
+
 class GreedyPayloadPolicy(_SequentialPolicy):
     name = "grp"
 
-    def __init__(self, seed: int = 0) -> None:
+    def __init__(self, seed: int = 0, priority: str = "index") -> None:
+        if priority not in PRIORITIES:
+            raise PolicyError(f"grp: unknown priority {priority!r}; one of {', '.join(PRIORITIES)}")
         super().__init__(seed)
+        self.priority = priority
         self._ways_home: tuple[Instance | None, FloatArray | None] = (None, None)
+
+    def order(self, inst: Instance, ready: list[int]) -> list[int]:
+        if self.priority == "index":
+            return ready
+        tail = inst.critical_tail
+        return sorted(ready, key=lambda j: (-float(tail[j]), j))
 
     def arrivals(self, state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
         """Seconds each free robot needs to reach ``task``; with ``"objective": "return"``,
@@ -133,7 +152,7 @@ class GreedyPayloadPolicy(_SequentialPolicy):
 class RandomPolicy(_SequentialPolicy):
     name = "rand"
 
-    def order(self, ready: list[int]) -> list[int]:
+    def order(self, inst: Instance, ready: list[int]) -> list[int]:
         return [ready[i] for i in self.rng.permutation(len(ready))]
 
     def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,

@@ -144,3 +144,17 @@ def test_rollout_budget_zero_is_lvws_and_no_budget_is_never_worse():
         assert sorted(map(str, rushed.assignments)) == sorted(map(str, base.assignments))
         full = simulate(inst, LVWSRolloutPolicy(model=model)).schedule
         assert check_schedule(inst, full) == [] and full.makespan <= base.makespan + 1e-9
+
+
+def test_validation_makespans_are_kept_and_read_back(tmp_path):
+    from lvws_ros.learning.training import validation_makespans
+
+    from lvws_ros.core.datasets import random_instance
+
+    val = [random_instance(np.random.default_rng(k), 3, 6, f"v{k}") for k in range(3)]  # proven at once
+    logs: list[str] = []
+    first = validation_makespans(val, 10.0, 1, tmp_path, logs.append)
+    assert len(first) == 3 and all(proven for _, proven in first.values())
+    assert list(tmp_path.glob("optima-t10-*.json")) and "3 solved" in logs[-1]
+    assert validation_makespans(val, 10.0, 1, tmp_path, logs.append) == first
+    assert "0 solved" in logs[-1]  # read back, not solved again

@@ -122,3 +122,21 @@ def test_voluntary_waits_are_free_robots_kept_from_a_task_they_could_start():
     assert voluntary_waits(state, Decision()) == {0: (0,), 1: (0,)}
     state.robot_free_at[1] = 5.0  # r1 busy: r0 alone cannot carry "heavy"
     assert voluntary_waits(state, Decision()) == {}
+
+
+def test_grp_in_critical_path_order_starts_the_longest_chain_first():
+    """Two robots; two independent 5 s tasks listed first, then a 1 s task that a 10 s
+    task waits for: in index order the chain starts at 5 s (16 s in all); longest path
+    first it starts at once (11 s, the chain's length)."""
+    from lvws_ros.core.problem import Instance, Robot, Task
+    from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+    inst = Instance("chain", ("a",), (Robot("r0", (1,), 1.0), Robot("r1", (1,), 1.0)),
+                    (Task("x0", (1,), 0.0, 5.0), Task("x1", (1,), 0.0, 5.0), Task("head", (1,), 0.0, 1.0),
+                     Task("tail", (1,), 0.0, 10.0, ("head",))))
+    assert simulate(inst, GreedyPayloadPolicy()).schedule.makespan == pytest.approx(16.0)
+    path = simulate(inst, GreedyPayloadPolicy(priority="critical-path")).schedule
+    assert check_schedule(inst, path) == []
+    assert path.makespan == pytest.approx(11.0)
+    with pytest.raises(PolicyError, match="priority"):
+        GreedyPayloadPolicy(priority="shortest")
