@@ -53,7 +53,7 @@ $(VENV)/.stamp-pkg: $(PKG_SRCS) $(VENV)/.stamp-msgs
 msgs: $(VENV)/.stamp-msgs
 
 test: env lint browser
-	$(PY) -m pytest -q -rs test  # -rs: every skip prints its reason
+	$(PY) -m pytest -q -rs --durations=15 test  # -rs: every skip prints its reason; the 15 slowest tests are listed
 
 # The paper's case study end to end: cell_sim + scheduler (default policy: auto, with the shipped
 # LVWS model) + recorder; the bag lands in bags/, Gantt PNG, GIF and logs in out/.
