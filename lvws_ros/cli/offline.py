@@ -170,8 +170,8 @@ def _evaluate_paper(args: argparse.Namespace, chosen: list[str]) -> int:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from lvws_ros.cli.evaluation import expert_records
     from lvws_ros.core.metrics import run_policy, summarize, to_csv, to_markdown
+    from lvws_ros.policies.expert_cache import expert_records
     from lvws_ros.registry import make_policy
 
     chosen = [p.strip() for p in (args.policies or "").split(",") if p.strip()]

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lvws_ros.cli.evaluation import expert_records
 from lvws_ros.core.datasets import DATASETS, dataset_instance
 from lvws_ros.core.executor import Policy
 from lvws_ros.core.families import (
@@ -35,6 +34,7 @@ from lvws_ros.core.metrics import ExpertRecord, RunRecord, run_policy, suboptima
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
 from lvws_ros.learning.features import LEGACY_PAIR_FEATURES, MODEL_FORMATS
+from lvws_ros.policies.expert_cache import expert_records
 from lvws_ros.registry import make_policy
 
 POLICIES = ("rand", "rand_subteam", "grp", "dbgm", "lvws", "lvws_sample", "lvws_rollout")

@@ -130,11 +130,17 @@ class AutoPolicy:
     def planned_makespan(self) -> float:
         return self.plan.makespan
 
-    def _finish(self, policy: Policy, state: State, deadline: float | None) -> SimulationResult | None:
-        """``policy``'s whole schedule from ``state`` (None when it stalls or the deadline passes)."""
+    def _finish(self, policy: Policy, state: State, deadline: float | None,
+                cut: list[Policy] | None = None) -> SimulationResult | None:
+        """``policy``'s whole schedule from ``state`` (None when it stalls or the deadline
+        passes; then, when ``cut`` is given, ``policy`` is appended to it if the deadline cut it)."""
         try:
             return simulate(state.instance, policy if deadline is None else Until(policy, deadline), state=state)
-        except (OutOfTime, PolicyError):
+        except OutOfTime:
+            if cut is not None:
+                cut.append(policy)
+            return None
+        except PolicyError:
             return None
 
     def _offer_run(self, state: State, res: SimulationResult) -> bool:
@@ -230,14 +236,13 @@ class AutoPolicy:
             self.retry = []
             for policy in self.quick_plans:
                 t0 = time.perf_counter()
-                res = self._finish(policy, state, limit)
-                if policy is self.sampler.base:
+                lvws = policy is self.sampler.base
+                res = self._finish(policy, state, limit, None if lvws else self.retry)  # a GRP plan cut: made later
+                if lvws:
                     self.sample_per_task = (time.perf_counter() - t0) / max(1, todo)  # a sample costs as much
                     self.sampling_fits = res is not None
                 if res is not None:
                     self._offer_run(state, res)
-                elif policy is not self.sampler.base:
-                    self.retry.append(policy)
             self.quick_makespan = self.plan.makespan if self.plan.steps else math.nan
             if not self.plan.steps and not late:
                 self.unplannable = todo // 2  # try again when half as many tasks are left

@@ -253,7 +253,7 @@ def _cache_groups(cfg: PipelineConfig, train_set: Sequence[Instance]) -> list[tu
 def _cache_path(cache_dir: str | Path, cfg: PipelineConfig, train_set: Sequence[Instance], sources: str) -> Path:
     """Demonstrations are cached by what they are: the format, the sources, the content of
     every training instance and the expert's time limit."""
-    digest = hashlib.sha256("".join(instance_key(i) for i in train_set).encode()).hexdigest()[:12]
+    digest = _digest(train_set)
     version = DEMOS_FORMAT.split("/")[-1]
     kind = "" if cfg.targets == "eq12" else f"-{cfg.targets}"
     return Path(cache_dir) / (f"demos{version}-{sources}-s{cfg.data_seed}-n{len(train_set)}"
@@ -272,33 +272,28 @@ def _cached_demos(cache: Path, log: Callable[[str], None]) -> list[Demo] | None:
     return demos
 
 
+def _digest(instances: Sequence[Instance]) -> str:
+    """What a set of instances is, for cache file names: their content, not their names."""
+    return hashlib.sha256("".join(instance_key(i) for i in instances).encode()).hexdigest()[:12]
+
+
 def validation_makespans(instances: Sequence[Instance], time_limit: float, workers: int, cache_dir: str | Path | None,
                          log: Callable[[str], None]) -> dict[str, tuple[float, bool]]:
-    """CP-SAT's best makespan of each validation instance within ``time_limit`` and
-    whether it is a proven optimum, by instance key; kept in ``cache_dir`` (a JSON file
-    named by the instances' content and the limit), so a resumed run does not solve them
-    again."""
-    import json
+    """CP-SAT's best makespan of each validation instance within ``time_limit`` on
+    ``workers`` workers and whether it is a proven optimum, by instance key; kept in
+    ``cache_dir`` (:func:`~lvws_ros.policies.expert_cache.expert_records`, a file named
+    by the instances' content, the limit and the workers), so a resumed run does not
+    solve them again."""
+    from lvws_ros.policies.expert_cache import expert_records
 
-    from lvws_ros.policies.exact import solve_exact
-
-    digest = hashlib.sha256("".join(instance_key(i) for i in instances).encode()).hexdigest()[:12]
-    cache = Path(cache_dir) / f"optima-t{time_limit:g}-{digest}.json" if cache_dir else None
-    known: dict[str, Any] = json.loads(cache.read_text()) if cache is not None and cache.is_file() else {}
-    t0, solved = time.perf_counter(), 0
-    for inst in instances:
-        key = instance_key(inst)
-        if key not in known:
-            res = solve_exact(inst, workers=workers, time_limit=time_limit)
-            known[key] = {"makespan": float(res.makespan or 0.0), "proven": bool(res.proven)}
-            solved += 1
-            if cache is not None:
-                cache.parent.mkdir(parents=True, exist_ok=True)
-                cache.write_text(json.dumps(known))
+    name = f"optima-t{time_limit:g}-w{workers}-{_digest(instances)}.json"
+    cache = Path(cache_dir) / name if cache_dir else None
+    t0 = time.perf_counter()
+    records = expert_records(instances, cache, time_limit, workers, progress=False)
     wanted = {instance_key(i) for i in instances}
-    out = {k: (float(v["makespan"]), bool(v["proven"])) for k, v in known.items() if k in wanted}
-    log(f"validation: {sum(p for _, p in out.values())} of {len(instances)} optima proven ({solved} solved in "
-        f"{time.perf_counter() - t0:.0f} s{f', the rest from {cache}' if solved < len(instances) else ''})")
+    out = {k: (r.makespan, r.status == "optimal") for k, r in records.items() if k in wanted}
+    log(f"validation: {sum(p for _, p in out.values())} of {len(out)} optima proven ({time.perf_counter() - t0:.0f} s"
+        f"{f'; kept in {cache}' if cache else ''})")
     return out
 
 
@@ -358,7 +353,6 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
                  log: Callable[[str], None] = print) -> tuple[GATN, dict[str, Any]]:
     """Label, train (from ``init``'s weights when given: fine-tuning), calibrate, DAgger;
     write the final checkpoint (no optimizer state) to ``out``."""
-
     tcfg = cfg.train
     torch.manual_seed(tcfg.seed)
     train_set, val_set = split_training_instances(cfg, own)

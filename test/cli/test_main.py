@@ -124,10 +124,10 @@ def test_check_refuses_broken_schedules_with_exit_2(tmp_path, text):
 def test_the_expert_cache_is_keyed_by_content_not_by_name(tmp_path):
     """Two different unnamed instances once shared one cache record (450 % suboptimality
     for an optimal schedule)."""
-    from lvws_ros.cli.evaluation import expert_records
     from lvws_ros.core.datasets import DATASETS, dataset_instance
     from lvws_ros.core.metrics import run_policy, summarize
     from lvws_ros.core.problem import Instance
+    from lvws_ros.policies.expert_cache import expert_records
     from lvws_ros.registry import make_policy
 
     a, b = (dataset_instance(DATASETS["I"], k, 0) for k in (800, 801))

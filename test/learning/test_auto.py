@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lvws_ros.core.datasets import DATASETS, dataset_instance, random_instance
-from lvws_ros.core.executor import State, check_decision, simulate
+from lvws_ros.core.executor import State, advance, check_decision, simulate
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import PolicyError
 from lvws_ros.learning.auto import AutoPolicy
@@ -122,3 +122,37 @@ def test_a_budget_spent_before_the_step_costs_that_step_only():
     auto.reset(inst)
     auto.decide(state)  # counted from now: a quick plan fits
     assert auto.fallbacks == 0 and auto.plans == 1
+
+
+def test_a_quick_plan_the_budget_cut_is_made_at_the_next_step():
+    """The critical-path GRP's finish, slowed past the first step's budget, waits in
+    ``retry`` and is made (once) from the next step's state, its plan offered there."""
+    from lvws_ros.core.problem import Instance, Robot, Task
+
+    class SlowFirstRun(GreedyPayloadPolicy):
+        runs = 0
+
+        def reset(self, instance):
+            super().reset(instance)
+            self.runs += 1
+
+        def decide(self, state):
+            if self.runs == 1:
+                time.sleep(0.2)  # past the 300 ms budget over the run's decisions
+            return super().decide(state)
+
+    inst = Instance("chain", ("a",), (Robot("r0", (1,), 1.0), Robot("r1", (1,), 1.0)),
+                    (Task("x0", (1,), 0.0, 5.0), Task("x1", (1,), 0.0, 5.0), Task("head", (1,), 0.0, 1.0),
+                     Task("tail", (1,), 0.0, 10.0, ("head",))))
+    auto = AutoPolicy(budget_ms=300.0, exact_tasks=0)  # no proof of optimality, which would end the search
+    slow = SlowFirstRun(priority="critical-path")
+    auto.quick_plans = (auto.quick_plans[0], auto.quick_plans[1], slow)
+    auto.reset(inst)
+    state = State.initial(inst)
+    nxt = advance(state, auto.decide(state))
+    assert auto.retry == [slow] and slow.runs == 1
+    assert nxt is not None and auto.plan.follows(nxt, auto.name)
+    auto.decide(nxt)
+    assert auto.retry == [] and slow.runs == 2  # made once more, from this step's state
+    path = simulate(inst, GreedyPayloadPolicy(priority="critical-path"), state=nxt).schedule.makespan
+    assert auto.plan.makespan <= path + 1e-9

@@ -1,4 +1,4 @@
-"""The exact solver's makespans for evaluation tables, cached between runs."""
+"""The exact solver's makespans (evaluation tables, training validation), cached between runs."""
 
 from __future__ import annotations
 
@@ -19,7 +19,9 @@ __all__ = ["expert_records"]
 def expert_records(instances: Sequence[Instance], cache: Path | None, time_limit: float,
                    workers: int, progress: bool = True) -> dict[str, ExpertRecord]:
     """Exact makespans keyed by :func:`~lvws_ros.core.formats.instance_key` (the content,
-    not the name), reusing ``cache`` (a JSON file) for instances already solved."""
+    not the name), reusing ``cache`` (a JSON file) for instances already solved. The file
+    is written after each solve, whole and atomically (a stopped run leaves the last
+    complete file, and a resumed one goes on from it)."""
     from tqdm import tqdm
 
     known: dict[str, ExpertRecord] = {}
@@ -36,5 +38,7 @@ def expert_records(instances: Sequence[Instance], cache: Path | None, time_limit
         known[key] = ExpertRecord(inst.name, res.status, float(res.makespan), float(res.bound), float(res.seconds))
         if cache is not None:
             cache.parent.mkdir(parents=True, exist_ok=True)
-            cache.write_text(json.dumps({k: asdict(v) for k, v in sorted(known.items())}, indent=1))
+            part = cache.with_name(cache.name + ".part")
+            part.write_text(json.dumps({k: asdict(v) for k, v in sorted(known.items())}, indent=1))
+            part.replace(cache)
     return known
