@@ -44,7 +44,7 @@ def test_solve_check_gantt(tmp_path):
 
 def test_beam_search_solves_and_says_when_its_budget_left_it_to_lvws(tmp_path):
     out = tmp_path / "beam.json"
-    res = lvws("solve", EXAMPLE, "--policy", "lvws_beam", "--out", out)
+    res = lvws("solve", EXAMPLE, "--policy", "lvws_beam", "--beam-width", "8", "--out", out)  # the default: 64
     assert "decided by LVWS alone" not in res.stderr
     assert lvws("check", EXAMPLE, out).stdout.startswith("valid")
     rushed = lvws("solve", EXAMPLE, "--policy", "lvws_beam", "--budget-ms", "0")
