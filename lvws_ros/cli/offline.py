@@ -161,7 +161,8 @@ def _evaluate_paper(args: argparse.Namespace, chosen: list[str]) -> int:
     text = reproduce(Path(args.out_md), data_seed=args.data_seed, policy_seed=args.seed,
                      time_limit=args.time_limit, table2_time_limit=args.table2_time_limit,
                      workers=args.workers, limit=args.limit, cache_dir=Path(args.out_dir) / "paper-cache",
-                     progress=not args.quiet, policies=chosen or POLICIES)
+                     progress=not args.quiet and args.processes <= 1, policies=chosen or POLICIES,
+                     processes=args.processes)
     print(text)
     print(f"written: {args.out_md}", file=sys.stderr)
     return 0
@@ -219,7 +220,7 @@ def cmd_gantt(args: argparse.Namespace) -> int:
 # stage's "{previous}" is the checkpoint the stage before wrote.
 RECIPES: dict[str, tuple[tuple[str, ...], ...]] = {
     "shipped": (
-        ("--datasets", "I,II,IV", "--count", "2500", "--families", "mixed", "--family-count", "4000",
+        ("--datasets", "I,II,IV", "--count", "2500", "--families", "mixed:4000,traits:1500,traits-return:1500",
          "--epochs", "15", "--dagger-rounds", "1", "--dagger-instances", "1000", "--dagger-epochs", "5",
          "--label-time-limit", "5"),
     ),
@@ -415,6 +416,9 @@ def _add_evaluate(add: Adder) -> None:
     p.add_argument("--workers", type=int, default=8, help="CP-SAT workers")
     p.add_argument("--out-dir", default="results", help="results.md, results.csv and the expert cache go here")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--processes", type=int, default=1,
+                   help="with --paper: run the tables' columns in this many processes at once (one thread each; "
+                        "no progress bars)")
 
 
 def _add_train(add: Adder) -> None:

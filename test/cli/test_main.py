@@ -106,6 +106,24 @@ def test_evaluate_paper_writes_both_tables_and_the_waiting_section(tmp_path):
     assert bad.returncode == 2 and "compare" in bad.stderr
 
 
+def test_the_paper_tables_in_processes_are_the_tables_of_one_process(tmp_path):
+    """``--processes``: the columns run in a pool of processes, and every figure is the
+    one a single process gives (the times per decision aside)."""
+    from lvws_ros.cli.paper import reproduce
+
+    def tables(processes: int) -> list[str]:
+        text = reproduce(tmp_path / f"r{processes}.md", time_limit=10, table2_time_limit=2, workers=1, limit=1,
+                         cache_dir=tmp_path / "cache", progress=False, log=lambda _: None,
+                         policies=("rand", "grp", "lvws"), processes=processes)
+        head, _, rest = text.partition("## Table I")
+        assert ("2 processes at once" in head) == (processes == 2)
+        timing = rest.index("## Decision time")
+        return (rest[:timing] + rest[rest.index("## Voluntary waiting"):]).splitlines()
+
+    one, two = tables(1), tables(2)
+    assert one == two and any(line.startswith("| LVWS |") for line in one)
+
+
 def test_bare_lvws_prints_usage_and_exits_2():
     res = lvws(check=False)
     assert res.returncode == 2 and "usage: lvws" in res.stderr and "Traceback" not in res.stderr

@@ -17,7 +17,7 @@ from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import PolicyError
 from lvws_ros.learning.gatn import GATN, GATNConfig
 from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, LVWSPolicy
-from lvws_ros.learning.search import LVWSBeamPolicy
+from lvws_ros.learning.search import DEFAULT_WIDTH, LVWSBeamPolicy
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 from lvws_ros.policies.exact import solve_exact
 from lvws_ros.registry import make_policy
@@ -96,14 +96,15 @@ def test_a_beam_narrower_than_one_is_refused(small_model):
         LVWSBeamPolicy(model=small_model, width=0)
 
 
-BEAM_BOUND_PERCENT = 5.0  # measured 3.32 % (3/8 at the optimum) with lvws-gatn/4, at widths 8, 32 and 64
-BEAM_TEST_WIDTH = 8  # the same figure here as the default width (64) at an eighth of the time
+BEAM_BOUND_PERCENT = 5.0  # measured 3.32 % (3/8 at the optimum) at the default width, 64, with lvws-gatn/5
+# (and lvws-gatn/4); narrower, lvws-gatn/5 is 8.16 % at widths 8-32 (one instance 41.9 % above), so the
+# test runs the width that ships
 
 
 def test_the_shipped_beam_is_within_bound_of_the_proven_optimum_with_travel():
     """Beam search with the shipped model against CP-SAT's proven optima on Dataset IV
     instances of another seed (13: not the reported data, not the validation split)."""
-    beam = make_policy("lvws_beam", width=BEAM_TEST_WIDTH)
+    beam = make_policy("lvws_beam", width=DEFAULT_WIDTH)
     hit, gaps = 0, []
     for k in range(8):
         inst = dataset_instance(DATASETS["IV"], k, seed=13)
