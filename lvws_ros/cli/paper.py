@@ -353,9 +353,12 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
               log: Callable[[str], None] = print, policies: Sequence[str] = POLICIES, processes: int = 1) -> str:
     """Every table into ``out``. With ``processes`` > 1 the columns run in that many
     processes at once (one torch thread each, CP-SAT with ``workers`` each; the heaviest,
-    with the search policies, first); the figures are the same as in one process, the
-    times per decision are those of processes sharing the machine."""
-    from concurrent.futures import ProcessPoolExecutor
+    with the search policies, first). With the optima cached the policies' figures are
+    those of one process (each column's policies are made afresh with their seeds); the
+    times per decision are those of processes sharing the machine, and what CP-SAT solves
+    on a time limit (optima not cached, the expert's waiting share, solved each run) can
+    differ with the load, as between any two runs."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from lvws_ros.learning.checkpoint import DEFAULT_MODELS, load_checkpoint
 
@@ -376,11 +379,16 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
             done[job] = _run_job(job, policies, data_seed, policy_seed, workers, cache_dir, progress, None)
     else:
         with ProcessPoolExecutor(max_workers=processes) as pool:
-            futures = {job: pool.submit(_run_job, job, policies, data_seed, policy_seed, workers, cache_dir, False, 1)
+            futures = {pool.submit(_run_job, job, policies, data_seed, policy_seed, workers, cache_dir, False, 1): job
                        for job in jobs}
-            for job, future in futures.items():
-                done[job] = future.result()
-                log(f"{job.key} ({job.extra or 'Table II'}): done at {time.perf_counter() - t0:.0f} s")
+            try:
+                for future in as_completed(futures):
+                    job = futures[future]
+                    done[job] = future.result()
+                    log(f"{job.key} ({job.extra or 'Table II'}): done at {time.perf_counter() - t0:.0f} s")
+            except BaseException:  # a failed column stops the others now, not after they finish
+                pool.shutdown(cancel_futures=True)
+                raise
     results = {(job.key, job.extra): value for job, value in done.items()}
     cols = {k: v for (k, extra), v in results.items() if extra == "ablation" and isinstance(v, Column)}
     col3 = results[("III", "")]

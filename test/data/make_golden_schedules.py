@@ -1,7 +1,8 @@
 """Writes golden_schedules.json: the schedules of fixed samples of Datasets I-IV and the
 held-out families under the deterministic policies, as the code that wrote them made them.
 test/core/test_traits.py schedules the same samples again and compares, so a change of the
-coverage rule that changes any schedule of a file without traits fails. Run from the root
+coverage rule that changes any schedule of a file without traits fails (the lvws entries are
+written again when a new model ships, so for LVWS they pin that model's schedules). Run from the root
 of the checkout whose behaviour is the reference: python test/data/make_golden_schedules.py"""
 
 from __future__ import annotations
