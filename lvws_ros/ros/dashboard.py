@@ -230,7 +230,8 @@ def _latency(diags: list[dict[str, str]]) -> list[dict[str, float]]:
     out: dict[int, float] = {}
     for d in diags:
         try:
-            step, ms = int(d["decisions"]), float(d["last_latency_ms"])
+            # the step the latency was measured at; a bag recorded before that key: the step count
+            step, ms = int(d.get("last_latency_step", d["decisions"])), float(d["last_latency_ms"])
         except (KeyError, ValueError):
             continue
         if step > 0 and math.isfinite(ms):

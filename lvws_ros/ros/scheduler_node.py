@@ -249,6 +249,7 @@ class SchedulerNode(LifecycleNode):
         self.error = ""
         self.rejected: dict[str, str] = {}  # message kind -> why its latest one was ignored
         self.last_latency = 0.0
+        self.last_latency_step = 0  # decisions made when last_latency was measured (0: none yet)
         self.received = 0
         self.arrived = self.decided_at = 0.0  # perf_counter: the latest message's arrival, the latest decision's end
         if not values["managed"]:
@@ -468,7 +469,7 @@ class SchedulerNode(LifecycleNode):
             return
         if decision is None:
             return
-        self.last_latency = decision.latency
+        self.last_latency, self.last_latency_step = decision.latency, decision.step + 1  # as "decisions" counts
         # never stamped before the inputs it answers (a sim clock may lag the state)
         stamp = max(self.get_clock().now().nanoseconds / 1e9, decision.team_stamp, decision.graph_stamp)
         self.pub.publish(convert.decision_to_msg(decision, convert.to_time(stamp)))
@@ -508,7 +509,8 @@ class SchedulerNode(LifecycleNode):
         status.message = message or problem or idle
         status.values = [KeyValue(key=k, value=str(v)) for k, v in (
             ("policy", self.policy_name), ("seed", self.seed), ("decisions", core.step if core else 0),
-            ("last_latency_ms", f"{1000 * self.last_latency:.3f}"), ("messages", self.received),
+            ("last_latency_ms", f"{1000 * self.last_latency:.3f}"), ("last_latency_step", self.last_latency_step),
+            ("messages", self.received),
             ("out_of_order_dropped", core.dropped if core else 0), ("world_restarts", core.restarts if core else 0),
             ("pending", len(core.pending) if core else 0), ("fallback_steps", core.fallbacks if core else 0),
             ("lifecycle", "active" if self.active else "inactive" if core is not None else "unconfigured"))]
