@@ -335,11 +335,9 @@ class _Job:
 
 
 def _run_job(job: _Job, policies: Sequence[str], data_seed: int, policy_seed: int, workers: int, cache_dir: Path,
-             progress: bool, threads: int | None) -> Column | float:
-    if threads is not None:  # a process of a pool: one core each
-        import torch
-
-        torch.set_num_threads(threads)
+             progress: bool) -> Column | float:
+    """One job, in this process (the learned policies decide on one torch thread each,
+    gatn.INFERENCE_THREADS, so a pool's processes do not compete for threads)."""
     insts = _instances(job.key, data_seed, job.limit)
     if job.extra == "expert-waits":
         return expert_voluntary_share(insts, job.time_limit, workers, progress)
@@ -352,7 +350,7 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
               cache_dir: Path = Path("data/paper"), progress: bool = True,
               log: Callable[[str], None] = print, policies: Sequence[str] = POLICIES, processes: int = 1) -> str:
     """Every table into ``out``. With ``processes`` > 1 the columns run in that many
-    processes at once (one torch thread each, CP-SAT with ``workers`` each; the heaviest,
+    processes at once (CP-SAT with ``workers`` each; the heaviest,
     with the search policies, first). With the optima cached the policies' figures are
     those of one process (each column's policies are made afresh with their seeds); the
     times per decision are those of processes sharing the machine, and what CP-SAT solves
@@ -376,10 +374,10 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
     if processes <= 1:
         for job in jobs:
             log(f"{job.key} ({job.extra or 'Table II'}): {len(_instances(job.key, data_seed, job.limit))} instances")
-            done[job] = _run_job(job, policies, data_seed, policy_seed, workers, cache_dir, progress, None)
+            done[job] = _run_job(job, policies, data_seed, policy_seed, workers, cache_dir, progress)
     else:
         with ProcessPoolExecutor(max_workers=processes) as pool:
-            futures = {pool.submit(_run_job, job, policies, data_seed, policy_seed, workers, cache_dir, False, 1): job
+            futures = {pool.submit(_run_job, job, policies, data_seed, policy_seed, workers, cache_dir, False): job
                        for job in jobs}
             try:
                 for future in as_completed(futures):
