@@ -12,7 +12,8 @@ plan to follow, ``auto``
    optimality ends the search for the run) or, for a bigger cell (with travel too),
    large-neighbourhood search on the plan (:mod:`~lvws_ros.policies.lns`), then LVWS sampling
    (only where LVWS's own quick plan finished within the budget: a sample costs as much)
-   (:func:`~lvws_ros.learning.sampling.sample_schedules`) in rounds sized to the time left;
+   (:func:`~lvws_ros.learning.sampling.sample_schedules`) in rounds sized to the time left
+   (:class:`~lvws_ros.learning.sampling.RoundCost`);
 3. follows the best plan (:class:`~lvws_ros.learning.search.FollowedPlan`, with the drift
    rule of :data:`~lvws_ros.core.executor.PLAN_DRIFT`); when the world departs from it (a
    task late or early, a robot lost or back, tasks added or cancelled), it plans again
@@ -49,7 +50,6 @@ from lvws_ros.core.executor import (
     Policy,
     SimulationResult,
     State,
-    TaskStatus,
     decision_deadline,
     schedule_from_state,
     simulate,
@@ -59,7 +59,14 @@ from lvws_ros.core.schedule import Schedule
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import ExpertError, PolicyError
 from lvws_ros.learning.policies import OutOfTime, Until
-from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, LVWSSamplePolicy, sample_schedules
+from lvws_ros.learning.sampling import (
+    DEFAULT_SAMPLES,
+    DEFAULT_TEMPERATURE,
+    LVWSSamplePolicy,
+    RoundCost,
+    sample_schedules,
+    tasks_to_do,
+)
 from lvws_ros.learning.search import FollowedPlan, PlannedStep, planned_steps
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
@@ -70,11 +77,6 @@ FOLLOW_SECONDS_PER_TASK = 0.003  # first guess of the time to turn an LNS schedu
 SEARCH_PATIENCE = 8  # searches in a row without a shorter plan before steps between searches are skipped
 
 __all__ = ["DEFAULT_BUDGET_MS", "EXACT_TASKS", "SEARCH_PATIENCE", "AutoPolicy"]
-
-
-def _to_do(state: State) -> int:
-    """Tasks not started yet."""
-    return int(np.sum(state.task_status <= TaskStatus.READY))
 
 
 class AutoPolicy:
@@ -103,7 +105,7 @@ class AutoPolicy:
         self.follow_per_task = FOLLOW_SECONDS_PER_TASK  # turning an LNS schedule into steps (measured)
         self.lns_windows = 0  # neighbourhoods the large-neighbourhood search solved
         self.sampling_fits = True  # LVWS's quick plan finished within the budget (else neither would a sample)
-        self.sample_per_task = 0.0  # seconds per sampled schedule per task to do (measured; sizes sampling rounds)
+        self.round_cost = RoundCost()  # what sampling rounds cost (measured; sizes them to the time left)
         self._schedule: Schedule | None = None  # the plan's whole schedule (CP-SAT's warm start)
         self.unimproved = 0  # searches in a row that did not shorten the plan
         self.skip = 0  # steps left to follow the plan without searching
@@ -122,7 +124,7 @@ class AutoPolicy:
         self.unplannable = math.inf
         self.retry = []
         self.sampling_fits = True
-        self.sample_per_task = 0.0
+        self.round_cost = RoundCost()
         self.lns_windows = 0
         self.unimproved = self.skip = self.skipped = 0
 
@@ -160,7 +162,7 @@ class AutoPolicy:
         """CP-SAT from ``state``, warm-started from the plan, within the time left."""
         from lvws_ros.policies.exact import ExactPolicy, proves_executor_bound
 
-        todo = _to_do(state)
+        todo = tasks_to_do(state)
         left = deadline - time.perf_counter()
         if left <= 0.01:
             return
@@ -223,7 +225,7 @@ class AutoPolicy:
             self.skip -= 1
             self.skipped += 1
             return self.plan.pop()
-        todo = _to_do(state)
+        todo = tasks_to_do(state)
         if not following:
             self.plan.clear()
             self.proven = False
@@ -239,7 +241,8 @@ class AutoPolicy:
                 lvws = policy is self.sampler.base
                 res = self._finish(policy, state, limit, None if lvws else self.retry)  # a GRP plan cut: made later
                 if lvws:
-                    self.sample_per_task = (time.perf_counter() - t0) / max(1, todo)  # a sample costs as much
+                    if res is not None:  # a schedule alone: a sampling round of one costs as much
+                        self.round_cost.add(todo, 1, time.perf_counter() - t0)
                     self.sampling_fits = res is not None
                 if res is not None:
                     self._offer_run(state, res)
@@ -253,17 +256,15 @@ class AutoPolicy:
                 self.improved["quick"] += 1
         if time.perf_counter() < deadline:
             self._exact(state, deadline)
-        one = self.sample_per_task * todo  # seconds per sampled schedule (so far): rounds sized to the time left
         while not self.proven and self.sampling_fits and self.sampler.temperature > 0 \
                 and (t0 := time.perf_counter()) < deadline:
-            if deadline - t0 < one:  # not even one schedule would finish in time
+            count = self.round_cost.count(todo, deadline - t0, self.sampler.samples)  # rounds sized to the time left
+            if not count:  # not even one schedule would finish in time
                 break
-            count = min(self.sampler.samples, max(1, int((deadline - t0) / max(one, 1e-6))))
             found = sample_schedules(self.sampler.base, state, count, self.sampler.temperature, self.rng,
                                      deadline=deadline)
-            if time.perf_counter() <= deadline:  # a whole round: its time per schedule
-                one = (time.perf_counter() - t0) / count
-                self.sample_per_task = one / max(1, todo)
+            if time.perf_counter() <= deadline:  # a whole round: what it cost
+                self.round_cost.add(todo, count, time.perf_counter() - t0)
             for s in found:
                 final = s.final
                 if self._offer(state, s.makespan, s.steps, partial(schedule_from_state, final, self.name)):

@@ -19,10 +19,12 @@ noisy reward matrices and POMO the best of many starts:
 
 Seeded: the same seed, state and model give the same schedules (without a budget).
 ``budget_ms`` (anytime): sampling rounds run until the budget of the decision step is
-spent, each of at most K schedules, as many as the time left is likely to fit (by the
-time LVWS's own schedule took); a round still running then is abandoned (its unfinished
-schedules are dropped), and the plan so far is followed; with none yet, the step is
-LVWS's own decision. None: ``rounds`` rounds of K schedules per decision step.
+spent, each of at most K schedules, as many as the time left is likely to fit
+(:class:`RoundCost`: schedules advanced in lockstep share each step's forward pass, so a
+round of c schedules costs less than c rounds of one); a round still running then is
+abandoned (its unfinished schedules are dropped), and the plan so far is followed; with
+none yet, the step is LVWS's own decision. None: ``rounds`` rounds of K schedules per
+decision step.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, State, advance, decision_deadline, final_makespan
+from lvws_ros.core.executor import Decision, State, TaskStatus, advance, decision_deadline, final_makespan
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import PolicyError
@@ -45,7 +47,62 @@ from lvws_ros.learning.search import FollowedPlan, PlannedStep, StateKey, _key, 
 DEFAULT_SAMPLES = 16
 DEFAULT_TEMPERATURE = 0.1  # Gumbel noise scale on R (whose expert targets lie in [0, 1])
 
-__all__ = ["DEFAULT_SAMPLES", "DEFAULT_TEMPERATURE", "LVWSSamplePolicy", "Sampled", "decision_reward", "sample_schedules"]
+BATCH_SHARE = 0.7  # until fitted: the share of one schedule's time its batch would share (measured, 2 cores)
+SAFETY = 0.8  # rounds are sized to this share of the time left (an abandoned round yields nothing)
+
+__all__ = ["DEFAULT_SAMPLES", "DEFAULT_TEMPERATURE", "LVWSSamplePolicy", "RoundCost", "Sampled", "decision_reward",
+           "sample_schedules", "tasks_to_do"]
+
+
+def tasks_to_do(state: State) -> int:
+    """Tasks not started yet: how long a schedule from ``state`` still is."""
+    return int(np.sum(state.task_status <= TaskStatus.READY))
+
+
+class RoundCost:
+    """Seconds a sampling round is likely to take, to size rounds to a budget's time left.
+
+    A round of ``count`` schedules from a state with ``todo`` tasks to do costs about
+    ``todo * (a + b * count)``: ``a`` what each lockstep step costs once for the batch
+    (the forward pass), ``b`` what it costs each schedule (its matching and encoding).
+    ``a`` and ``b`` are fitted by least squares on the whole rounds timed so far; until
+    two different counts have been timed, the rounds timed give ``a + b`` and a batch is
+    taken to share :data:`BATCH_SHARE` of it (so the first rounds grow, and the fit
+    follows). Nothing timed: unknown (:meth:`count` gives the most)."""
+
+    def __init__(self) -> None:
+        self.sums = np.zeros(5)  # n, sum x, sum y, sum x^2, sum xy over rounds: x = count, y = seconds / todo
+
+    def add(self, todo: int, count: int, seconds: float) -> None:
+        x, y = float(count), seconds / max(1, todo)
+        self.sums += (1.0, x, y, x * x, x * y)
+
+    def coefficients(self) -> tuple[float, float]:
+        """(a, b) in seconds per task to do: per lockstep step and batch, per schedule."""
+        n, sx, sy, sxx, sxy = self.sums
+        spread = n * sxx - sx * sx
+        if spread > 1e-9 * max(1.0, n * sxx):
+            b = (n * sxy - sx * sy) / spread
+            a = (sy - b * sx) / n
+            if a >= 0 and b > 0:
+                return float(a), float(b)
+        x0, y0 = sx / n, sy / n  # one count timed (or no usable fit): split y0 = a + b x0 by the share
+        u = y0 / (BATCH_SHARE + (1 - BATCH_SHARE) * x0)
+        return BATCH_SHARE * u, (1 - BATCH_SHARE) * u
+
+    @property
+    def known(self) -> bool:
+        """Whether a round has been timed."""
+        return bool(self.sums[0])
+
+    def count(self, todo: int, seconds_left: float, most: int) -> int:
+        """The most schedules (at most ``most``) a round from a state with ``todo`` tasks
+        to do is likely to finish within :data:`SAFETY` of ``seconds_left``; 0 when not
+        even one would."""
+        if not self.known:
+            return most
+        a, b = self.coefficients()
+        return max(0, min(most, int((SAFETY * seconds_left / max(1, todo) - a) / b)))
 
 
 class Sampled:
@@ -150,14 +207,13 @@ class LVWSSamplePolicy:
         self.rng = np.random.default_rng(seed)
         self.searches = 0  # decision steps that sampled (since reset)
         self.fallbacks = 0  # steps decided by LVWS alone: the budget was spent before any schedule was found
-        self._one = math.inf  # seconds per sampled schedule in the latest whole round (sizes rounds under a budget)
+        self.cost = RoundCost()  # what sampling rounds cost on this machine (sizes rounds under a budget)
 
     def reset(self, instance: Instance) -> None:
         self.base.reset(instance)
         self.plan.clear()
         self.rng = np.random.default_rng(self.seed)
         self.searches = self.fallbacks = 0
-        self._one = math.inf
 
     @property
     def planned_makespan(self) -> float:
@@ -177,17 +233,17 @@ class LVWSSamplePolicy:
         rounds = [] if self.plan.steps else [(1, 0.0)]  # without a plan, LVWS's own schedule from here first
         if self.temperature > 0:
             rounds += [(self.samples, self.temperature)] * self.rounds
-        k, one = 0, self._one  # seconds one schedule took (sizes the rounds under a budget)
+        k, todo = 0, tasks_to_do(state)
         while k < len(rounds) or (deadline is not None and self.temperature > 0):
             count, temperature = rounds[k] if k < len(rounds) else (self.samples, self.temperature)
             k += 1
             t0 = time.perf_counter()
-            if deadline is not None and math.isfinite(one):  # as many as the budget left is likely to fit
-                count = min(count, max(1, int((deadline - t0) / max(one, 1e-6))))
+            if deadline is not None:  # as many as the budget left is likely to fit
+                count = max(1, self.cost.count(todo, deadline - t0, count))
             found = sample_schedules(self.base, state, count, temperature, self.rng, deadline=deadline)
             spent = time.perf_counter()
-            if deadline is None or spent <= deadline:  # a whole round: its time per schedule
-                one = self._one = (spent - t0) / count
+            if deadline is None or spent <= deadline:  # a whole round: what it cost
+                self.cost.add(todo, count, spent - t0)
             for s in found:
                 if s.makespan < best - TOLERANCE:
                     best = s.makespan

@@ -16,7 +16,7 @@ from lvws_ros.errors import PolicyError
 from lvws_ros.learning.features import InstanceFeatures
 from lvws_ros.learning.gatn import GATN, GATNConfig, batch_decision_outputs, decision_outputs
 from lvws_ros.learning.policies import NO_VOLUNTARY_WAIT, LVWSPolicy
-from lvws_ros.learning.sampling import LVWSSamplePolicy, sample_schedules
+from lvws_ros.learning.sampling import SAFETY, LVWSSamplePolicy, RoundCost, sample_schedules
 from lvws_ros.registry import make_policy
 
 
@@ -136,6 +136,21 @@ def test_a_budget_still_gives_valid_schedules(small_model):
     for inst in _instances():
         sched = simulate(inst, LVWSSamplePolicy(model=small_model, budget_ms=20.0, temperature=0.3)).schedule
         assert check_schedule(inst, sched) == [], inst.name
+
+
+def test_rounds_are_sized_by_what_a_batch_shares():
+    cost = RoundCost()
+    assert not cost.known and cost.count(10, 0.05, 16) == 16  # nothing timed: the most, cut by the deadline
+    cost.add(10, 1, 0.010)  # one schedule alone, 10 tasks to do: 1 ms a task
+    one_alone = int(SAFETY * 0.05 / 0.010)
+    assert cost.count(10, 0.05, 16) > one_alone  # a batch shares its forward passes: more than one per 10 ms
+    assert cost.count(10, 0.005, 16) == 0  # not even one fits
+    cost.add(10, 5, 0.030)  # five in lockstep: 3 ms a task, so a = b = 0.5 ms a task
+    a, b = cost.coefficients()
+    assert a == pytest.approx(0.0005) and b == pytest.approx(0.0005)
+    assert cost.count(10, 0.05, 16) == int((SAFETY * 0.05 / 10 - a) / b)
+    assert cost.count(10, 0.05, 4) == 4  # never more than asked
+    assert cost.count(20, 0.05, 16) < cost.count(10, 0.05, 16)  # longer schedules: fewer of them
 
 
 @pytest.mark.parametrize("kwargs", [{"samples": 0}, {"temperature": -1.0}, {"temperature": float("nan")},
