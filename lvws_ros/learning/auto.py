@@ -263,7 +263,7 @@ class AutoPolicy:
                 break
             found = sample_schedules(self.sampler.base, state, count, self.sampler.temperature, self.rng,
                                      deadline=deadline)
-            if time.perf_counter() <= deadline:  # a whole round: what it cost
+            if time.perf_counter() <= deadline:  # a round that ended in time: what it cost
                 self.round_cost.add(todo, count, time.perf_counter() - t0)
             for s in found:
                 final = s.final

@@ -48,7 +48,7 @@ DEFAULT_SAMPLES = 16
 DEFAULT_TEMPERATURE = 0.1  # Gumbel noise scale on R (whose expert targets lie in [0, 1])
 
 BATCH_SHARE = 0.7  # until fitted: the share of one schedule's time its batch would share (measured, 2 cores)
-SAFETY = 0.8  # rounds are sized to this share of the time left (an abandoned round yields nothing)
+SAFETY = 0.8  # rounds are sized to this share of the time left (a cut round drops its unfinished schedules)
 
 __all__ = ["DEFAULT_SAMPLES", "DEFAULT_TEMPERATURE", "LVWSSamplePolicy", "RoundCost", "Sampled", "decision_reward",
            "sample_schedules", "tasks_to_do"]
@@ -65,10 +65,11 @@ class RoundCost:
     A round of ``count`` schedules from a state with ``todo`` tasks to do costs about
     ``todo * (a + b * count)``: ``a`` what each lockstep step costs once for the batch
     (the forward pass), ``b`` what it costs each schedule (its matching and encoding).
-    ``a`` and ``b`` are fitted by least squares on the whole rounds timed so far; until
-    two different counts have been timed, the rounds timed give ``a + b`` and a batch is
-    taken to share :data:`BATCH_SHARE` of it (so the first rounds grow, and the fit
-    follows). Nothing timed: unknown (:meth:`count` gives the most)."""
+    ``a`` and ``b`` are fitted by least squares on the rounds timed so far (those that
+    ended by the deadline); until two different counts have been timed, or when the
+    fit is not positive, the rounds timed give ``a + b x count`` and a batch is taken to
+    share :data:`BATCH_SHARE` of one schedule's time (so the first rounds grow, and the
+    fit follows). Nothing timed: unknown (:meth:`count` gives the most)."""
 
     def __init__(self) -> None:
         self.sums = np.zeros(5)  # n, sum x, sum y, sum x^2, sum xy over rounds: x = count, y = seconds / todo
@@ -102,7 +103,8 @@ class RoundCost:
         if not self.known:
             return most
         a, b = self.coefficients()
-        return max(0, min(most, int((SAFETY * seconds_left / max(1, todo) - a) / b)))
+        fits = (SAFETY * seconds_left / max(1, todo) - a) / max(b, 1e-12)
+        return int(max(0.0, min(float(most), fits)))
 
 
 class Sampled:
@@ -207,7 +209,9 @@ class LVWSSamplePolicy:
         self.rng = np.random.default_rng(seed)
         self.searches = 0  # decision steps that sampled (since reset)
         self.fallbacks = 0  # steps decided by LVWS alone: the budget was spent before any schedule was found
-        self.cost = RoundCost()  # what sampling rounds cost on this machine (sizes rounds under a budget)
+        # What sampling rounds cost on this machine, per task to do (sizes rounds under a
+        # budget): kept across instances, whose rounds it measures alike.
+        self.cost = RoundCost()
 
     def reset(self, instance: Instance) -> None:
         self.base.reset(instance)
@@ -242,7 +246,7 @@ class LVWSSamplePolicy:
                 count = max(1, self.cost.count(todo, deadline - t0, count))
             found = sample_schedules(self.base, state, count, temperature, self.rng, deadline=deadline)
             spent = time.perf_counter()
-            if deadline is None or spent <= deadline:  # a whole round: what it cost
+            if deadline is None or spent <= deadline:  # a round that ended in time: what it cost
                 self.cost.add(todo, count, spent - t0)
             for s in found:
                 if s.makespan < best - TOLERANCE:

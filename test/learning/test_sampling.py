@@ -142,15 +142,17 @@ def test_rounds_are_sized_by_what_a_batch_shares():
     cost = RoundCost()
     assert not cost.known and cost.count(10, 0.05, 16) == 16  # nothing timed: the most, cut by the deadline
     cost.add(10, 1, 0.010)  # one schedule alone, 10 tasks to do: 1 ms a task
-    one_alone = int(SAFETY * 0.05 / 0.010)
-    assert cost.count(10, 0.05, 16) > one_alone  # a batch shares its forward passes: more than one per 10 ms
+    assert cost.count(10, 0.05, 16) > int(0.05 / 0.010)  # a batch shares its forward passes: more than one per 10 ms
     assert cost.count(10, 0.005, 16) == 0  # not even one fits
     cost.add(10, 5, 0.030)  # five in lockstep: 3 ms a task, so a = b = 0.5 ms a task
     a, b = cost.coefficients()
     assert a == pytest.approx(0.0005) and b == pytest.approx(0.0005)
-    assert cost.count(10, 0.05, 16) == int((SAFETY * 0.05 / 10 - a) / b)
-    assert cost.count(10, 0.05, 4) == 4  # never more than asked
-    assert cost.count(20, 0.05, 16) < cost.count(10, 0.05, 16)  # longer schedules: fewer of them
+    assert SAFETY == 0.8 and cost.count(10, 0.052, 16) == 7  # 0.8 x 52 ms / 10 tasks = 4.16 ms a task: 7.32 of them
+    assert cost.count(10, 0.052, 4) == 4  # never more than asked
+    assert cost.count(20, 0.052, 16) == 3  # longer schedules, fewer of them: 2.08 ms a task
+    zero = RoundCost()
+    zero.add(10, 1, 0.0)  # a round too quick for the clock: as many as asked, not an error
+    assert zero.count(10, 0.05, 16) == 16
 
 
 @pytest.mark.parametrize("kwargs", [{"samples": 0}, {"temperature": -1.0}, {"temperature": float("nan")},
