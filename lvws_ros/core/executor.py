@@ -79,6 +79,10 @@ class State:
     def ready_tasks(self) -> list[int]:
         return [int(j) for j in np.flatnonzero(self.task_status == TaskStatus.READY)]
 
+    def tasks_to_do(self) -> list[int]:
+        """Tasks not started yet (queued or ready): what a schedule from here still places."""
+        return [int(j) for j in np.flatnonzero(self.task_status <= TaskStatus.READY)]
+
     def task_state_vectors(self) -> npt.NDArray[np.float32]:
         """s^t = [ready, assigned, incomplete] per task (section III-A)."""
         s = self.task_status

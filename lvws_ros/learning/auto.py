@@ -65,7 +65,6 @@ from lvws_ros.learning.sampling import (
     LVWSSamplePolicy,
     RoundCost,
     sample_schedules,
-    tasks_to_do,
 )
 from lvws_ros.learning.search import FollowedPlan, PlannedStep, planned_steps
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
@@ -162,7 +161,7 @@ class AutoPolicy:
         """CP-SAT from ``state``, warm-started from the plan, within the time left."""
         from lvws_ros.policies.exact import ExactPolicy, proves_executor_bound
 
-        todo = tasks_to_do(state)
+        todo = len(state.tasks_to_do())
         left = deadline - time.perf_counter()
         if left <= 0.01:
             return
@@ -225,7 +224,7 @@ class AutoPolicy:
             self.skip -= 1
             self.skipped += 1
             return self.plan.pop()
-        todo = tasks_to_do(state)
+        todo = len(state.tasks_to_do())
         if not following:
             self.plan.clear()
             self.proven = False

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lvws_ros.core.executor import Decision, State, TaskStatus, advance, decision_deadline, final_makespan
+from lvws_ros.core.executor import Decision, State, advance, decision_deadline, final_makespan
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import PolicyError
@@ -51,12 +51,7 @@ BATCH_SHARE = 0.7  # until fitted: the share of one schedule's time its batch wo
 SAFETY = 0.8  # rounds are sized to this share of the time left (a cut round drops its unfinished schedules)
 
 __all__ = ["DEFAULT_SAMPLES", "DEFAULT_TEMPERATURE", "LVWSSamplePolicy", "RoundCost", "Sampled", "decision_reward",
-           "sample_schedules", "tasks_to_do"]
-
-
-def tasks_to_do(state: State) -> int:
-    """Tasks not started yet: how long a schedule from ``state`` still is."""
-    return int(np.sum(state.task_status <= TaskStatus.READY))
+           "sample_schedules"]
 
 
 class RoundCost:
@@ -237,7 +232,7 @@ class LVWSSamplePolicy:
         rounds = [] if self.plan.steps else [(1, 0.0)]  # without a plan, LVWS's own schedule from here first
         if self.temperature > 0:
             rounds += [(self.samples, self.temperature)] * self.rounds
-        k, todo = 0, tasks_to_do(state)
+        k, todo = 0, len(state.tasks_to_do())
         while k < len(rounds) or (deadline is not None and self.temperature > 0):
             count, temperature = rounds[k] if k < len(rounds) else (self.samples, self.temperature)
             k += 1

@@ -563,7 +563,7 @@ def solve_exact(
     state = State.initial(inst) if state is None else state.copy()
     state.refresh()
     hint = left_shift(inst, heuristic_schedule(inst, state) if hint is None else hint, state)
-    todo = [j for j in range(inst.num_tasks) if state.task_status[j] in (TaskStatus.QUEUED, TaskStatus.READY)]
+    todo = state.tasks_to_do()
     if not todo:
         sched = schedule_from_state(state, "exact")
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
