@@ -68,10 +68,15 @@ class _SequentialPolicy:
         return None if team is None else tuple(int(ok[i]) for i in team)
 
     def decide(self, state: State) -> Decision:
+        return self.decide_among(state, state.free_robots(), state.ready_tasks())
+
+    def decide_among(self, state: State, robots: list[int], tasks: list[int]) -> Decision:
+        """The decision over some of the free ``robots`` and ready ``tasks`` only (the
+        others are left as they are: a plan holds them); ``decide`` takes them all."""
         inst = state.instance
         self.traits_from = len(inst.capabilities) if inst.traits else None
-        free = np.array(state.free_robots(), dtype=np.int64)
-        order = np.array(self.order(inst, state.ready_tasks()), dtype=np.int64)
+        free = np.array(robots, dtype=np.int64)
+        order = np.array(self.order(inst, tasks), dtype=np.int64)
         out = []
         # tasks the free robots together can cover, all at once (a subset covers no more)
         possible = covered(inst.robot_amounts[free].sum(axis=0), inst.robot_payload[free].sum(),

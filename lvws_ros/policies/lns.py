@@ -89,12 +89,13 @@ def _better(a: tuple[float, float], b: tuple[float, float]) -> bool:
 
 def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int], window: list[int],
                   later: list[int], scale: int, solve_by: float, workers: int,
-                  seed: int) -> tuple[Schedule | None, bool]:
+                  seed: int, work: float | None = None) -> tuple[Schedule | None, bool]:
     """One neighbourhood: the window's subteams and starts free, the later tasks' subteams
     and per-robot orders fixed, the prefix as it is (tasks after ``later`` are not in the
     model: the left shift places them); the left-shifted solution (None: none found by
     ``solve_by``, a perf_counter value the building of the model counts against), and
-    whether the solver ran at all (False: the model's building took the round's time)."""
+    whether the solver ran at all (False: the model's building took the round's time).
+    ``work``: CP-SAT's deterministic time limit instead (the same result every run)."""
     by_task = inc.by_task()
     dur = {j: max(1, round(float(inst.durations[j]) * scale)) for j in window + later}
     free = set(window) | set(later)
@@ -162,9 +163,12 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
         model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
     solver = cp_model.CpSolver()
     time_limit = solve_by - time.perf_counter()  # the model's building counts against the round's time
-    if time_limit <= 0.01:
+    if work is not None:
+        solver.parameters.max_deterministic_time = work
+    elif time_limit <= 0.01:
         return None, False
-    solver.parameters.max_time_in_seconds = time_limit
+    else:
+        solver.parameters.max_time_in_seconds = time_limit
     solver.parameters.num_workers = workers
     solver.parameters.random_seed = seed
     solver.parameters.cp_model_probing_level = 0  # a neighbourhood's time goes to search, not to probing
@@ -196,13 +200,16 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
 
 def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,
             window: int | None = None, workers: int = 1, seed: int = 0,
-            round_limit: float = ROUND_LIMIT, bound: float | None = None) -> LNSResult:
+            round_limit: float = ROUND_LIMIT, bound: float | None = None,
+            max_rounds: int | None = None) -> LNSResult:
     """Improve ``incumbent`` (a valid schedule of ``inst``, from ``state`` when given) by
     large-neighbourhood search within ``time_limit`` seconds (module docstring). Never
     returns a schedule longer than the incumbent; the same seed gives the same windows.
     With a lower ``bound`` (:func:`~lvws_ros.core.bounds.lower_bounds`), it stops when the
     schedule reaches it (optimal). ``window``: tasks per neighbourhood (None: DEFAULT_WINDOW,
-    DEFAULT_WINDOW_TRAVEL with travel)."""
+    DEFAULT_WINDOW_TRAVEL with travel). ``max_rounds``: at most this many neighbourhoods,
+    each solved within ``round_limit`` of CP-SAT's deterministic time (not wall time) on
+    ``workers`` = 1: the same result on every run and machine (``time_limit`` still holds)."""
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state
     best = left_shift(inst, incumbent, state)
@@ -220,6 +227,8 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     after = 0.0  # the longest a round ran past its solve_by so far (a left shift and check after the solve, or
     # a model's building that took the round's time): kept back from the deadline
     while (left := deadline - time.perf_counter() - after) > 0.05:
+        if max_rounds is not None and rounds >= max_rounds:
+            break
         if bound is not None and best.makespan <= bound + TOLERANCE:
             break  # optimal: nothing left to shorten
         by_task = best.by_task()
@@ -240,8 +249,11 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         later = todo[first_at + window:first_at + window + later_windows * window]
         whole = len(todo) <= window  # the whole rest fits one window: one solve says all, with all the time left
         solve_by = time.perf_counter() + (left if whole else min(round_limit, left))
+        work = None if max_rounds is None else round_limit
+        if work is not None:
+            solve_by = deadline
         cand, solved = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers,
-                                     seed + rounds)
+                                     seed + rounds, work)
         rounds += solved
 
         if cand is not None and _better(_score(cand), _score(best)):
