@@ -550,13 +550,16 @@ def solve_exact(
     hint: Schedule | None = None,
     seed: int = 0,
     formulation: str = "auto",
+    work: float | None = None,
 ) -> ExpertResult:
     """Minimise the makespan of ``inst`` (from ``state`` when given) with CP-SAT.
 
     ``formulation``: "coalition" lists the minimal covering subteams of each task (fast
     for small teams), "boolean" uses a robot-task boolean per pair (any team size),
     "auto" (default) takes the coalition model when the team has at most
-    MAX_ENUMERATED robots and the coalitions number at most COALITION_LIMIT."""
+    MAX_ENUMERATED robots and the coalitions number at most COALITION_LIMIT. ``work``: a
+    limit of CP-SAT's deterministic time too (with ``workers`` = 1 the same result on every
+    run)."""
     if formulation not in ("auto", "coalition", "boolean"):
         raise ExpertError(f"unknown formulation {formulation!r} (auto | coalition | boolean)")
     t_start = time.perf_counter()
@@ -577,6 +580,8 @@ def solve_exact(
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
     solver.parameters.num_workers = workers
     solver.parameters.random_seed = seed
+    if work is not None:
+        solver.parameters.max_deterministic_time = work
     code = solver.solve(m.model)
     seconds = time.perf_counter() - t_start
     found = code in (cp_model.OPTIMAL, cp_model.FEASIBLE)
