@@ -117,16 +117,16 @@ def cmd_solve(args: argparse.Namespace) -> int:
 def cmd_import(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from lvws_ros.core.importers import import_csv, import_mspsp
+    from lvws_ros.core.importers import import_csv, import_mspsp, import_psplib
 
-    wanted = 1 if args.kind == "mspsp" else 2
+    wanted = 2 if args.kind == "csv" else 1
     if len(args.files) != wanted:
-        raise ConfigError(f"{args.kind} takes {wanted} file(s): "
-                          f"{'FILE.dzn' if wanted == 1 else 'ROBOTS.csv TASKS.csv'}, got {len(args.files)}")
-    if args.kind == "mspsp":
+        usage = {"mspsp": "FILE.dzn", "psplib": "FILE.sm or FILE.rcp", "csv": "ROBOTS.csv TASKS.csv"}[args.kind]
+        raise ConfigError(f"{args.kind} takes {wanted} file(s): {usage}, got {len(args.files)}")
+    if args.kind != "csv":
         if args.sites or args.objective != "makespan":
             raise ConfigError("--sites and --objective are for csv")
-        inst = import_mspsp(args.files[0])
+        inst = (import_mspsp if args.kind == "mspsp" else import_psplib)(args.files[0])
         if args.name:
             inst = replace(inst, name=args.name)
     else:
@@ -375,10 +375,11 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--noise-seed", type=int, default=0, help="the noise's seed (with --noise)")
     p.add_argument("--out", help="also write the schedule to this file")
 
-    p = add("import", cmd_import, "turn a multi-skill project scheduling file (MiniZinc data, .dzn) or CSV files "
-                                   "of robots and tasks into an lvws-instance/1 file")
-    p.add_argument("kind", choices=("mspsp", "csv"))
-    p.add_argument("files", nargs="+", help="mspsp: FILE.dzn; csv: ROBOTS.csv TASKS.csv")
+    p = add("import", cmd_import, "turn a multi-skill project scheduling file (MiniZinc data, .dzn), a PSPLIB "
+                                   "project scheduling file (.sm or Patterson .rcp) or CSV files of robots and "
+                                   "tasks into an lvws-instance/1 file")
+    p.add_argument("kind", choices=("mspsp", "psplib", "csv"))
+    p.add_argument("files", nargs="+", help="mspsp: FILE.dzn; psplib: FILE.sm or FILE.rcp; csv: ROBOTS.csv TASKS.csv")
     p.add_argument("--sites", default=None, help="csv: SITES.csv (name,x,y): the travel extension")
     p.add_argument("--objective", choices=("makespan", "return"), default="makespan",
                    help="csv: the instance's objective")

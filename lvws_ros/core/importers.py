@@ -1,6 +1,7 @@
 """Importers for the files users already have, into ``lvws-instance/1`` (formats.md,
 "Importing"): the multi-skill project scheduling (MSPSP) instances of the MiniZinc data
-format, and a plain CSV of robots and one of tasks.
+format, the resource-constrained project scheduling (RCPSP) instances of PSPLIB (its
+``.sm`` and the Patterson ``.rcp`` formats), and a plain CSV of robots and one of tasks.
 
 Every error is an :class:`~lvws_ros.errors.InstanceError` naming the file and the line.
 Nothing in a file is evaluated: the DataZinc reader accepts only the assignments the MSPSP
@@ -13,6 +14,8 @@ from __future__ import annotations
 import csv
 import math
 import re
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +23,7 @@ from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.travel import build_travel
 from lvws_ros.errors import InstanceError
 
-__all__ = ["import_csv", "import_mspsp", "parse_dzn"]
+__all__ = ["import_csv", "import_mspsp", "import_psplib", "parse_dzn"]
 
 # ---------------------------------------------------------------- DataZinc (MSPSP)
 
@@ -161,9 +164,25 @@ def import_mspsp(path: str | Path) -> Instance:
         if not (1 <= a <= n_acts and 1 <= b <= n_acts):
             raise InstanceError(f"{where}: precedence {n + 1} ({a} -> {b}) names an activity outside 1..{n_acts}")
         before[b - 1].add(a - 1)
-    kept = set(keep)
+    kept_before = _kept_before(before, set(keep))
+    robots = tuple(Robot(f"res{r + 1}", (), 0.0, traits=tuple((skills[s], 1.0) for s in range(n_skills)
+                                                               if mastery[r][s]))
+                   for r in range(n_res))
+    tasks = tuple(Task(f"act{a + 1}", (), 0.0, float(dur[a]),
+                       tuple(f"act{q + 1}" for q in sorted(kept_before(a))),
+                       requires=tuple((skills[s], float(sreq[a][s])) for s in range(n_skills) if sreq[a][s]))
+                  for a in keep)
+    try:
+        return Instance(p.stem, (), robots, tasks, traits=tuple(skills), roles=True)
+    except InstanceError as exc:
+        raise InstanceError(f"{where}: {exc}") from None
 
-    def kept_before(a: int) -> set[int]:  # through dropped activities
+
+def _kept_before(before: dict[int, set[int]], kept: set[int]) -> Callable[[int], set[int]]:
+    """The kept activities each activity must wait for, through the dropped ones (those
+    without duration: a precedence chain through them still holds)."""
+
+    def kept_before(a: int) -> set[int]:
         out: set[int] = set()
         stack, seen = list(before[a]), set(before[a])
         while stack:
@@ -176,16 +195,185 @@ def import_mspsp(path: str | Path) -> Instance:
                 stack.append(p)
         return out
 
-    robots = tuple(Robot(f"res{r + 1}", (), 0.0, traits=tuple((skills[s], 1.0) for s in range(n_skills)
-                                                               if mastery[r][s]))
-                   for r in range(n_res))
-    tasks = tuple(Task(f"act{a + 1}", (), 0.0, float(dur[a]),
-                       tuple(f"act{q + 1}" for q in sorted(kept_before(a))),
-                       requires=tuple((skills[s], float(sreq[a][s])) for s in range(n_skills) if sreq[a][s]))
-                  for a in keep)
+    return kept_before
+
+
+# ---------------------------------------------------------------- PSPLIB (RCPSP)
+
+IDLE_TRAIT = "no_resource"  # held by the stand-ins of activities that need no resource
+
+
+@dataclass
+class _Project:
+    """A single-mode RCPSP as read: per job (1-based in the file, 0-based here) its
+    duration, demand of each renewable resource and successors, and the lines they are on."""
+
+    capacity: list[int]
+    duration: list[int]
+    demand: list[list[int]]
+    successors: list[list[int]]
+    line: list[int]  # of its duration and demands
+    succ_line: list[int]  # of its successors
+
+
+def _numbers(text: str, where: str, line: int) -> list[int]:
     try:
-        return Instance(p.stem, (), robots, tasks, traits=tuple(skills), roles=True)
-    except InstanceError as exc:
+        values = [int(v) for v in text.split()]
+    except ValueError:
+        raise InstanceError(f"{where} line {line}: expected integers, got {text.strip()[:40]!r}") from None
+    if any(v < 0 for v in values):
+        raise InstanceError(f"{where} line {line}: expected non-negative integers, got {text.strip()[:40]!r}")
+    return values
+
+
+def _read_rcp(lines: list[str], where: str) -> _Project:
+    """The Patterson format: ``jobs resources``, the capacities, then per job its
+    duration, its demands, the number of successors and the successors (a job's numbers
+    may run on over several lines)."""
+    tokens = [(v, n + 1) for n, text in enumerate(lines) for v in _numbers(text, where, n + 1)]
+    k = 0
+
+    def take(what: str) -> tuple[int, int]:
+        nonlocal k
+        if k >= len(tokens):
+            raise InstanceError(f"{where} line {len(lines)}: the file ends before {what}")
+        k += 1
+        return tokens[k - 1]
+
+    n_jobs, n_res = take("the number of jobs")[0], take("the number of resources")[0]
+    capacity = [take(f"the capacity of resource {r + 1}")[0] for r in range(n_res)]
+    out = _Project(capacity, [], [], [], [], [])
+    for job in range(n_jobs):
+        d, line = take(f"job {job + 1}")
+        out.duration.append(d)
+        out.line.append(line)
+        out.succ_line.append(line)
+        out.demand.append([take(f"job {job + 1}'s demands")[0] for _ in range(n_res)])
+        count = take(f"job {job + 1}'s number of successors")[0]
+        out.successors.append([take(f"job {job + 1}'s successors")[0] for _ in range(count)])
+    if k < len(tokens):
+        raise InstanceError(f"{where} line {tokens[k][1]}: more numbers than the {n_jobs} jobs declared")
+    return out
+
+
+def _sm_header(lines: list[str], where: str, label: str) -> tuple[int, int]:
+    """The number after ``label :`` on its line of an ``.sm`` file, and that line's index."""
+    for n, text in enumerate(lines):
+        if text.strip().startswith(label) and ":" in text:
+            value = text.split(":", 1)[1].split()
+            if not value or not value[0].isdigit():
+                raise InstanceError(f"{where} line {n + 1}: expected a number after {label!r}")
+            return int(value[0]), n
+    raise InstanceError(f"{where}: no {label!r} line (not a PSPLIB .sm file?)")
+
+
+def _sm_rows(lines: list[str], where: str, section: str, count: int, width: int) -> list[tuple[list[int], int]]:
+    """The ``count`` rows of numbers after the line starting with ``section`` (header and
+    separator lines skipped), each with at least ``width`` numbers, and their line numbers."""
+    at = next((n for n, text in enumerate(lines) if text.strip().startswith(section)), None)
+    if at is None:
+        raise InstanceError(f"{where}: no {section!r} section")
+    rows: list[tuple[list[int], int]] = []
+    n = at + 1
+    while len(rows) < count:
+        if n >= len(lines):
+            raise InstanceError(f"{where} line {n}: {section} ends after {len(rows)} of {count} rows")
+        text = lines[n].strip()
+        n += 1
+        if not rows and (not text or not text.split()[0].isdigit()):
+            continue  # the column names and separators
+        row = _numbers(text, where, n)
+        if len(row) < width:
+            raise InstanceError(f"{where} line {n}: {section} expected at least {width} numbers, got {len(row)}")
+        rows.append((row, n))
+    return rows
+
+
+def _read_sm(lines: list[str], where: str) -> _Project:
+    """The PSPLIB ``.sm`` format (single mode): the numbers of jobs and resources from the
+    header, the precedence relations, the requests and durations, the availabilities."""
+    n_jobs, _ = _sm_header(lines, where, "jobs (incl. supersource/sink )")
+    n_res, _ = _sm_header(lines, where, "- renewable")
+    n_non, at = _sm_header(lines, where, "- nonrenewable")
+    if n_non:
+        raise InstanceError(f"{where} line {at + 1}: nonrenewable resources are not supported (renewable only)")
+    out = _Project([], [], [], [], [], [])
+    for job, (row, line) in enumerate(_sm_rows(lines, where, "PRECEDENCE RELATIONS:", n_jobs, 3)):
+        if row[0] != job + 1:
+            raise InstanceError(f"{where} line {line}: expected job {job + 1}, got {row[0]}")
+        if row[1] != 1:
+            raise InstanceError(f"{where} line {line}: job {job + 1} has {row[1]} modes; only single-mode "
+                                "files (.sm) are supported")
+        if len(row) != 3 + row[2]:
+            raise InstanceError(f"{where} line {line}: job {job + 1} lists {len(row) - 3} successors, "
+                                f"declares {row[2]}")
+        out.successors.append(row[3:])
+        out.succ_line.append(line)
+    for job, (row, line) in enumerate(_sm_rows(lines, where, "REQUESTS/DURATIONS:", n_jobs, 3 + n_res)):
+        if row[0] != job + 1 or len(row) != 3 + n_res:
+            raise InstanceError(f"{where} line {line}: expected job {job + 1}, its mode, duration and "
+                                f"{n_res} demands")
+        out.duration.append(row[2])
+        out.demand.append(row[3:])
+        out.line.append(line)
+    row, line = _sm_rows(lines, where, "RESOURCEAVAILABILITIES:", 1, n_res)[0]
+    if len(row) != n_res:
+        raise InstanceError(f"{where} line {line}: expected {n_res} availabilities, got {len(row)}")
+    out.capacity = row
+    return out
+
+
+def import_psplib(path: str | Path) -> Instance:
+    """A resource-constrained project scheduling instance of PSPLIB, in its ``.sm``
+    format (single mode) or the Patterson format (``.rcp``; told apart by content), as
+    traits, exactly: each unit of renewable resource ``k`` is a robot ``R<k>_<u>`` with
+    trait ``R<k>`` at 1, each activity a task ``job<n>`` that requires its demands, and
+    the precedence relations as ``after``; no travel. Activities without duration (the
+    source and sink) are dropped, their precedences kept through them. An activity that
+    lasts but needs no resource requires one ``no_resource`` unit, held by as many
+    stand-in robots as there are such activities (it then waits for nothing)."""
+    p = Path(path)
+    where = str(p)
+    try:
+        lines = p.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InstanceError(f"{where}: cannot read the PSPLIB file: {exc}") from None
+    sm = any(text.strip().startswith("PRECEDENCE RELATIONS:") for text in lines)
+    project = _read_sm(lines, where) if sm else _read_rcp(lines, where)
+    return _project_instance(project, p.stem, where)
+
+
+def _project_instance(project: _Project, name: str, where: str) -> Instance:
+    n_jobs, cap = len(project.duration), project.capacity
+    traits = [f"R{r + 1}" for r in range(len(cap))]
+    before: dict[int, set[int]] = {a: set() for a in range(n_jobs)}
+    for a, succ in enumerate(project.successors):
+        for b in succ:
+            if not 1 <= b <= n_jobs:
+                raise InstanceError(f"{where} line {project.succ_line[a]}: job {a + 1}'s successor {b} is outside "
+                                    f"1..{n_jobs}")
+            before[b - 1].add(a)
+    keep = [a for a in range(n_jobs) if project.duration[a] > 0]
+    idle = [a for a in keep if not any(project.demand[a])]
+    for a in keep:
+        for r, d in enumerate(project.demand[a]):
+            if d > cap[r]:
+                raise InstanceError(f"{where} line {project.line[a]}: job {a + 1} needs {d} of resource {r + 1}, "
+                                    f"its capacity is {cap[r]}")
+    kept_before = _kept_before(before, set(keep))
+    robots = [Robot(f"R{r + 1}_{u + 1}", (), 0.0, traits=((traits[r], 1.0),)) for r in range(len(cap))
+              for u in range(cap[r])]
+    robots += [Robot(f"{IDLE_TRAIT}_{u + 1}", (), 0.0, traits=((IDLE_TRAIT, 1.0),)) for u in range(len(idle))]
+    tasks = tuple(Task(f"job{a + 1}", (), 0.0, float(project.duration[a]),
+                       tuple(f"job{q + 1}" for q in sorted(kept_before(a))),
+                       requires=tuple((traits[r], float(d)) for r, d in enumerate(project.demand[a]) if d)
+                       or ((IDLE_TRAIT, 1.0),))
+                  for a in keep)
+    if not tasks:
+        raise InstanceError(f"{where}: no activity lasts any time")
+    try:
+        return Instance(name, (), tuple(robots), tasks, traits=tuple(traits) + ((IDLE_TRAIT,) if idle else ()))
+    except InstanceError as exc:  # what needs the whole instance (a cycle)
         raise InstanceError(f"{where}: {exc}") from None
 
 

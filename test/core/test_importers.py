@@ -6,16 +6,19 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from lvws_ros.core.executor import simulate
 from lvws_ros.core.formats import load_instance
-from lvws_ros.core.importers import import_csv, import_mspsp, parse_dzn
+from lvws_ros.core.importers import import_csv, import_mspsp, import_psplib, parse_dzn
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import InstanceError
 from lvws_ros.policies.exact import solve_exact
 from lvws_ros.registry import make_policy
+
+ROOT = Path(__file__).resolve().parents[2]
 
 # Written for this test in the layout of the MSPSP benchmark files: a source (1) and a sink
 # (6) without duration, three workers, two skills. Worker 1 holds both skills but fills one
@@ -172,3 +175,111 @@ def test_csv_from_a_spreadsheet_and_errors_on_the_robots_file_name_its_line(tmp_
     (tmp_path / "robots.csv").write_text("id,welder,gripper,payload\nw1,1,,1\nw2,1,1,\narm,,2,2\n")
     with pytest.raises(InstanceError, match=re.escape("tasks.csv line 2: site, from and to need the sites file")):
         import_csv(tmp_path / "robots.csv", tmp_path / "tasks.csv")
+
+
+# ---------------------------------------------------------------- PSPLIB
+
+PSPLIB = ROOT / "examples" / "psplib"
+
+
+def _sm_table(path):
+    """The REQUESTS/DURATIONS and PRECEDENCE RELATIONS rows of an .sm file, read here
+    independently of the importer: {job: (duration, demands, successors)}."""
+    lines = path.read_text().splitlines()
+    prec = lines.index("PRECEDENCE RELATIONS:")
+    req = lines.index("REQUESTS/DURATIONS:")
+    succ = {int(v[0]): [int(x) for x in v[3:]] for v in (lines[k].split() for k in range(prec + 2, req - 1))}
+    rows = {}
+    for text in lines[req + 3:]:
+        if text.startswith("*"):
+            break
+        v = [int(x) for x in text.split()]
+        rows[v[0]] = (v[2], v[3:], succ[v[0]])
+    return rows
+
+
+def test_a_j30_file_is_read_exactly():
+    path = PSPLIB / "j301_1.sm"
+    inst = import_psplib(path)
+    assert inst.name == "j301_1" and inst.traits == ("R1", "R2", "R3", "R4") and inst.travel is None
+    assert inst.num_robots == 12 + 13 + 4 + 12  # RESOURCEAVAILABILITIES: one robot per unit
+    assert sum(1 for r in inst.robots if r.traits == (("R3", 1.0),)) == 4
+    rows = _sm_table(path)
+    assert len(rows) == 32 and [t.id for t in inst.tasks] == [f"job{n}" for n in range(2, 32)]  # source, sink dropped
+    for t in inst.tasks:
+        duration, demands, _ = rows[int(t.id[3:])]
+        assert t.duration == duration
+        assert dict(t.requires) == {f"R{k + 1}": float(d) for k, d in enumerate(demands) if d}
+        preds = {f"job{a}" for a, (_, _, s) in rows.items() if int(t.id[3:]) in s and a != 1}
+        assert set(t.after) == preds
+    by_id = {t.id: t for t in inst.tasks}  # a few rows read by eye
+    assert by_id["job3"].duration == 4 and by_id["job3"].requires == (("R1", 10.0),)
+    assert by_id["job20"].requires == (("R2", 10.0),) and by_id["job20"].duration == 7
+    assert by_id["job22"].after == ("job16", "job17", "job18") and by_id["job2"].after == ()
+
+
+def test_a_patterson_file_is_read_and_activities_without_demand_wait_for_nothing():
+    inst = import_psplib(PSPLIB / "pat1.rcp")
+    assert inst.num_tasks == 12 and [r.id for r in inst.robots][:3] == ["R1_1", "R1_2", "R2_1"]
+    by_id = {t.id: t for t in inst.tasks}
+    assert by_id["job2"].duration == 6 and by_id["job2"].requires == (("R1", 1.0),)
+    assert by_id["job2"].after == () and by_id["job9"].after == ("job2",)
+    idle = [t for t in inst.tasks if t.requires == (("no_resource", 1.0),)]
+    assert idle and sum(r.id.startswith("no_resource") for r in inst.robots) == len(idle)
+    res = solve_exact(inst, workers=2, time_limit=20)
+    assert res.proven and res.makespan == 19  # the published optimum of pat1
+    assert check_schedule(inst, res.schedule) == []
+
+
+SM_BAD = [
+    (lambda t: t.replace("  2      1     8       4    0    0    0", "  2      1     8       4    0    x    0"),
+     "line 56: expected integers"),
+    (lambda t: t.replace("   5        1          1          20", "   5        1          1          99"),
+     "line 23: job 5's successor 99 is outside 1..32"),
+    (lambda t: t.replace("   5        1          1          20", "   5        1          2          20"),
+     "line 23: job 5 lists 1 successors, declares 2"),
+    (lambda t: t.replace("  3      1     4      10    0    0    0", "  3      1     4      20    0    0    0"),
+     "line 57: job 3 needs 20 of resource 1, its capacity is 12"),
+    (lambda t: t.replace("   4        1          3           5   9  10", "   4        2          3           5   9  10"),
+     "line 22: job 4 has 2 modes"),
+    (lambda t: t.replace("  - nonrenewable              :  0", "  - nonrenewable              :  2"),
+     "line 10: nonrenewable resources are not supported"),
+    (lambda t: t.split("RESOURCEAVAILABILITIES:")[0], "no 'RESOURCEAVAILABILITIES:' section"),
+    (lambda t: t.replace("   4        1          3           5   9  10", "   4        1          3           5   9   2")
+     .replace("   2        1          3           6  11  15", "   2        1          3           4  11  15"),
+     "cyclic prerequisites"),
+]
+
+
+@pytest.mark.parametrize("edit,message", SM_BAD)
+def test_bad_psplib_files_name_the_line(tmp_path, edit, message):
+    path = tmp_path / "bad.sm"
+    path.write_text(edit((PSPLIB / "j301_1.sm").read_text()))
+    with pytest.raises(InstanceError, match=re.escape(message)) as info:
+        import_psplib(path)
+    assert str(path) in str(info.value)
+
+
+@pytest.mark.parametrize("text,message", [
+    ("3 1\n2\n0 0 1 2\n4 1 1 3\n0 0 0 7\n", "line 5: more numbers than the 3 jobs declared"),
+    ("3 1\n2\n0 0 1 2\n4 1 1\n", "line 4: the file ends before job 2's successors"),
+    ("3 1\n2\n0 0 1 2\n4 -1 1 3\n0 0 0\n", "line 4: expected non-negative integers"),
+    ("3 1\n2\n0 0 1 2\n4 1 1 5\n0 0 0\n", "line 4: job 2's successor 5 is outside 1..3"),
+])
+def test_bad_patterson_files_name_the_line(tmp_path, text, message):
+    path = tmp_path / "bad.rcp"
+    path.write_text(text)
+    with pytest.raises(InstanceError, match=re.escape(message)):
+        import_psplib(path)
+
+
+def test_lvws_import_psplib(tmp_path):
+    out = tmp_path / "j301_1.json"
+    done = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "import", "psplib", str(PSPLIB / "j301_1.sm"),
+                           "--out", str(out)], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert load_instance(out) == import_psplib(PSPLIB / "j301_1.sm") and "41 robots, 30 tasks" in done.stdout
+    (tmp_path / "bad.rcp").write_text("3 1\n2\n0 0 1 2\n4 1 1\n")
+    bad = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "import", "psplib", str(tmp_path / "bad.rcp"),
+                          "--out", str(tmp_path / "x.json")], capture_output=True, text=True, check=False)
+    assert bad.returncode == 2 and "bad.rcp line 4" in bad.stderr and "Traceback" not in bad.stderr
