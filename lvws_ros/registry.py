@@ -24,7 +24,11 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     ``lvws_beam`` (per search; None: no budget), ``width`` for ``lvws_beam`` (None: its
     default), ``matching`` for ``lvws`` (greedy | exact; None: greedy), ``samples`` and
     ``temperature`` for ``lvws_sample`` (None: its defaults; its
-    noise is seeded by ``seed``); the learned ones ignore the options of the others."""
+    noise is seeded by ``seed``); the learned ones ignore the options of the others.
+    ``auto`` without ``budget_ms`` but with ``time_limit`` (seconds of planning in all),
+    ``iterations`` or ``background`` (its planner in a process of its own, for a node) is
+    the planner (:mod:`lvws_ros.planning.auto`); with ``budget_ms`` (or neither), the search
+    within each decision's budget (:mod:`lvws_ros.learning.auto`)."""
     if name == "grp":
         from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
@@ -45,6 +49,15 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
             "lvws": LVWSPolicy, "dbgm": DBGMPolicy, "lvws_rollout": LVWSRolloutPolicy}
         if name == "lvws_rollout":
             return LVWSRolloutPolicy(model_path=model_path, budget_ms=options.get("budget_ms"))
+        if name == "auto" and options.get("budget_ms") is None \
+                and (options.get("time_limit") is not None or options.get("iterations") is not None
+                     or options.get("background")):
+            from lvws_ros.planning.auto import DEFAULT_TIME_LIMIT, PlannedAutoPolicy
+
+            limit = options.get("time_limit")
+            return PlannedAutoPolicy(model_path=model_path, seed=seed, background=bool(options.get("background")),
+                                     time_limit=DEFAULT_TIME_LIMIT if limit is None else float(limit),
+                                     workers=options.get("workers") or 8, iterations=options.get("iterations"))
         if name == "auto":
             from lvws_ros.learning.auto import DEFAULT_BUDGET_MS, AutoPolicy
             from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE

@@ -4,4 +4,5 @@ import sys
 
 from lvws_ros.cli.main import main
 
-sys.exit(main())
+if __name__ == "__main__":  # a process started by ``spawn`` (the planner's) imports this module too
+    sys.exit(main())

@@ -62,6 +62,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     elif args.policy in LEARNED_POLICIES:
         options = {"model_path": args.model, "budget_ms": args.budget_ms, "width": args.beam_width,
                    "samples": args.samples, "temperature": args.temperature, "matching": args.matching}
+        if args.policy == "auto" and args.budget_ms is None:  # the planner: --time-limit seconds in all
+            options.update(time_limit=args.time_limit, workers=args.workers)
     from lvws_ros.core.bounds import gap, lower_bounds
     from lvws_ros.core.subteams import TOLERANCE
     from lvws_ros.policies.exact import proves_executor_bound
@@ -90,7 +92,14 @@ def cmd_solve(args: argparse.Namespace) -> int:
               "was spent before any schedule was found)", file=sys.stderr)
     if args.policy == "lvws_sample":
         print(f"lvws_sample: seed {args.seed}", file=sys.stderr)
-    if args.policy == "auto":
+    if args.policy == "auto" and (report := getattr(policy, "report", None)) is not None:
+        improved = report.improved
+        print(f"auto: planned {report.seconds:.1f} s ({report.rounds} improvement rounds): quick plan "
+              f"{policy.quick_makespan:g}, final plan {report.makespan:g} by {report.source}, improved by CP-SAT "
+              f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)} and by "
+              f"sampling {improved.get('sample', 0)} times; "
+              f"{'proven optimal' if report.proven else 'not proven optimal'}; seed {args.seed}", file=sys.stderr)
+    elif args.policy == "auto":
         improved = getattr(policy, "improved", {})
         print(f"auto: quick plan {getattr(policy, 'quick_makespan', float('nan')):g}, improved by a quick plan "
               f"made later {improved.get('quick', 0)}, by CP-SAT {improved.get('exact', 0)}, "
@@ -355,12 +364,14 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("instance")
     p.add_argument("--policy", choices=POLICY_NAMES, default="grp")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--time-limit", type=float, default=60.0, help="exact policy: CP-SAT time limit [s]")
-    p.add_argument("--workers", type=int, default=8, help="exact policy: CP-SAT workers")
+    p.add_argument("--time-limit", type=float, default=60.0,
+                   help="exact: CP-SAT time limit; auto: planning time in all, less once proven optimal [s]")
+    p.add_argument("--workers", type=int, default=8, help="exact and auto: CP-SAT workers")
     p.add_argument("--model", default=None, help="lvws/dbgm policy: checkpoint (default: the shipped one)")
     p.add_argument("--budget-ms", type=float, default=None,
                    help="auto, lvws_rollout, lvws_sample: time budget per decision step, lvws_beam: per search [ms] "
-                        "(default: none; auto: 1000)")
+                        "(default: none; with it auto searches within each decision's budget instead of planning "
+                        "for --time-limit)")
     p.add_argument("--beam-width", type=int, default=None,
                    help="lvws_beam: partial schedules kept at each depth (default: its DEFAULT_WIDTH)")
     p.add_argument("--samples", type=int, default=None,

@@ -469,6 +469,13 @@ def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:
                    and r.available and not r.current_task else None) for r in team.robots))
 
 
+def close_policy(policy: Policy | None) -> None:
+    """Call the policy's ``close`` when it has one (a policy that runs a process)."""
+    close = getattr(policy, "close", None)
+    if callable(close):
+        close()
+
+
 class OnlineScheduler:
     """Decides when a robot became available or a task became ready; see the module doc."""
 
@@ -498,8 +505,18 @@ class OnlineScheduler:
     def set_policies(self, policy: Policy, fallback: Policy | None) -> None:
         """Switch policies (a runtime parameter change): the next decision resets them on
         the current instance; pending assignments stay."""
+        old = (self.policy, self.fallback)
         self.policy, self.fallback = policy, fallback
         self._inst, self._key, self._main_refused = None, None, ""
+        for p in old:
+            if p is not policy and p is not fallback:
+                close_policy(p)
+
+    def close(self) -> None:
+        """Release what the policies hold beyond this object (the planner's process of
+        ``auto``): the node's cleanup and shutdown."""
+        close_policy(self.policy)
+        close_policy(self.fallback)
 
     def _in_order(self, kind: str, last: float | None, stamp: float) -> bool:
         """False for an out-of-order snapshot; a big jump back restarts the world."""
@@ -644,6 +661,9 @@ class OnlineScheduler:
             if budgeted is not None:  # for this decision only, whether or not the policy read it
                 budgeted.clock = None
         latency = time.perf_counter() - t0
+        said: list[str] | None = getattr(self.policy, "notices", None)  # what the policy has to report (WARN)
+        while said:
+            self.notices.append(f"{self.policy.name}: {said.pop(0)}")
         assigned = {r for _, team in decision.assignments for r in team}
         out = OnlineDecision(
             self.step,

@@ -89,7 +89,6 @@ class Param:
 
 BEAM_BUDGET_MS = 1000.0  # lvws_beam's search budget when decision_budget_ms is 0
 SAMPLE_BUDGET_MS = 50.0  # lvws_sample's budget per decision when decision_budget_ms is 0
-AUTO_BUDGET_MS = 1000.0  # auto's budget per decision when decision_budget_ms is 0
 MAX_BEAM_WIDTH = 1_000_000  # the beam_width parameter's range (a search that wide never ends within a budget)
 MAX_SAMPLES = 100_000  # the samples parameter's range
 
@@ -101,7 +100,8 @@ PARAMETERS: dict[str, Param] = {
     "seed": Param(int, 0, "seed of the random policies", 0, 2**31 - 1),
     "decision_budget_ms": Param(float, 0.0, "time budget of a decision of the search policies (auto, lvws_sample, "
                                             "lvws_rollout, lvws_beam, exact) in ms; 0: their own limits "
-                                            f"(auto: {AUTO_BUDGET_MS:g} ms, lvws_beam: {BEAM_BUDGET_MS:g} ms, "
+                                            f"(auto: the planner in a process beside the node, decisions from its "
+                                            f"plan; lvws_beam: {BEAM_BUDGET_MS:g} ms, "
                                             f"lvws_sample: {SAMPLE_BUDGET_MS:g} ms); auto, lvws_sample, lvws_rollout "
                                             "and lvws_beam count it from the arrival of the message that made the "
                                             "decision due",
@@ -190,8 +190,8 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
         options.update(beam)
     if name == "lvws_sample":
         options.update(sample)
-    if name == "auto":
-        options["budget_ms"] = budget if budget > 0 else AUTO_BUDGET_MS
+    if name == "auto":  # with a budget: the search within each decision's; without: the planner beside the node
+        options.update({"budget_ms": budget} if budget > 0 else {"background": True})
     if name == "exact" and budget > 0:
         options["time_limit"] = budget / 1000
     fallback = values["fallback_policy"]
@@ -305,7 +305,9 @@ class SchedulerNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def free(self) -> None:
-        """Drop the core with its policies and model (cleanup)."""
+        """Drop the core with its policies and model (cleanup), and the planner's process."""
+        if self.core is not None:
+            self.core.close()
         self.core = None
         gc.unfreeze()  # what configure froze may go now
         gc.collect()
@@ -521,6 +523,8 @@ class SchedulerNode(LifecycleNode):
 
     def destroy_node(self) -> None:
         self.worker.shutdown(wait=True, cancel_futures=True)  # a decision in flight ends first
+        if self.core is not None:
+            self.core.close()
         super().destroy_node()
 
 

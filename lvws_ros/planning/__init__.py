@@ -1,0 +1,3 @@
+"""The planner (above the models it runs): one whole plan, dispatched from at once and
+improved while the robots work (``planner``), its repair and dispatch (``follow``), its
+process beside a node (``worker``), and ``auto`` as its face (``auto``)."""

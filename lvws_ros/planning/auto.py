@@ -1,0 +1,136 @@
+"""``auto`` as a planner: one whole plan, improved while there is time; decisions taken from it.
+
+Two ways to run it:
+
+* **offline** (``lvws solve --policy auto --time-limit S``): at the first decision the
+  :class:`~lvws_ros.planning.planner.Planner` plans for ``time_limit`` seconds in all (less
+  when it proves the plan optimal or the plan reaches the lower bound); every decision is
+  then the plan's (:class:`~lvws_ros.planning.follow.PlanFollower`; should the world depart
+  from it, the follower repairs it as it goes);
+* **beside a node** (``background=True``, the scheduler node's ``auto``): the planner runs in
+  a process of its own (:class:`~lvws_ros.planning.worker.PlannerProcess`) and never holds a
+  decision up: each decision takes the newest plan that has arrived and dispatches from it at
+  once (milliseconds), then hands the state after the decision to the planner, which repairs
+  its plan from there and goes on improving it. Before the first plan of a cell has arrived,
+  a decision waits for it at most ``first_wait`` seconds (after the process has started, at
+most READY_WAIT: its imports and the model's loading), then is GRP's. If the planner's
+  process dies, the decision is GRP's, a notice says so (the node puts it on
+  ``diagnostics`` as a WARN) and the process is started again.
+
+The per-decision search of :class:`~lvws_ros.learning.auto.AutoPolicy` (a budget of
+``budget_ms`` per decision, searched from each decision's state) stays what ``auto`` is
+when a budget is given.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from lvws_ros.core.executor import Decision, State
+from lvws_ros.core.problem import Instance
+from lvws_ros.errors import PolicyError
+from lvws_ros.planning.follow import PlanFollower
+from lvws_ros.planning.planner import Planner, PlanReport
+from lvws_ros.planning.worker import PlannerProcess, PlanUpdate
+from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+DEFAULT_TIME_LIMIT = 60.0  # seconds of planning offline
+FIRST_WAIT = 1.0  # seconds a decision waits for the first plan of a cell from the planner's process
+READY_WAIT = 30.0  # seconds the first decision waits for the planner's process to start (imports, model)
+
+__all__ = ["DEFAULT_TIME_LIMIT", "FIRST_WAIT", "PlannedAutoPolicy"]
+
+
+class PlannedAutoPolicy:
+    """``auto`` with a planner (module docstring)."""
+
+    name = "auto"
+
+    def __init__(self, model_path: str | Path | None = None, seed: int = 0, time_limit: float = DEFAULT_TIME_LIMIT,
+                 background: bool = False, workers: int = 8, learned: bool = True,
+                 first_wait: float = FIRST_WAIT, iterations: int | None = None) -> None:
+        if time_limit < 0 or first_wait < 0:
+            raise PolicyError(f"auto: the time limit and the first wait must be >= 0, got {time_limit}, {first_wait}")
+        self.options = {"model_path": model_path, "seed": seed, "workers": workers, "learned": learned}
+        self.time_limit, self.iterations, self.first_wait = time_limit, iterations, first_wait
+        self.background = background
+        self.planner = Planner(**self.options)  # type: ignore[arg-type]
+        self.process: PlannerProcess | None = None
+        self.follower: PlanFollower | None = None
+        self.grp = GreedyPayloadPolicy(priority="critical-path")
+        self.report: PlanReport | None = None  # the latest plan's
+        self.notices: list[str] = []  # for the node's diagnostics
+        self.fallbacks = 0  # decisions taken by GRP (no plan yet, or the planner's process gone)
+        self.restarts = 0  # the planner's process started again after it died
+        self.proven = False
+        self.quick_makespan = float("nan")
+        self.improved: dict[str, int] = {}
+        self._cell: Instance | None = None
+
+    @property
+    def planned_makespan(self) -> float:
+        return self.report.makespan if self.report is not None else float("nan")
+
+    def reset(self, instance: Instance) -> None:
+        self.grp.reset(instance)
+        if not self.background:
+            self.follower, self.report = None, None
+            self.planner = Planner(**self.options)  # type: ignore[arg-type]
+        elif self.process is None:
+            self.process = PlannerProcess(**self.options)
+            self.process.start()
+
+    def decide(self, state: State) -> Decision:
+        if self.background:
+            return self._decide_beside(state)
+        if self.follower is None:
+            self.report = self.planner.run(state, time_limit=None if self.iterations is not None else self.time_limit,
+                                           iterations=self.iterations)
+            assert self.planner.plan is not None
+            self.follower = PlanFollower(self.planner.plan.schedule)
+            self.proven, self.improved = self.report.proven, dict(self.report.improved)
+            self.quick_makespan = self.planner.quick_makespan
+        return self.follower.decide(state)
+
+    def _take(self, update: PlanUpdate | None) -> None:
+        if update is not None:
+            self.follower, self.report = PlanFollower(update.schedule), update.report
+            self.proven, self.improved = update.report.proven, dict(update.report.improved)
+
+    def _decide_beside(self, state: State) -> Decision:
+        if self.process is None or not self.process.alive():
+            if self.process is not None:
+                self.notices.append("the planner's process is gone: this decision is GRP's; starting it again")
+                self.restarts += 1
+            self.process = PlannerProcess(**self.options)
+            self.process.start()
+            self._cell = None  # the new process gets the cell; the plan followed so far stays until it sends one
+        self._take(self.process.latest())
+        new_cell = self._cell is not state.instance
+        if new_cell:
+            self._cell = state.instance
+            self.process.send(state)
+        if self.follower is None and new_cell:  # the cell's first plan: the best within first_wait
+            self.process.wait_ready(READY_WAIT)
+            end = time.perf_counter() + self.first_wait
+            while (left := end - time.perf_counter()) > 0 and (update := self.process.latest(left)) is not None:
+                self._take(update)
+                if update.report.proven:
+                    break
+        if self.follower is None:
+            self.fallbacks += 1
+            decision = self.grp.decide(state)
+        else:
+            decision = self.follower.decide(state)
+        after = state.copy()
+        for task, team in decision.assignments:
+            after.start(task, team)
+        self.process.send(after)
+        return decision
+
+    def close(self) -> None:
+        """Stop the planner's process (the node's cleanup and shutdown)."""
+        if self.process is not None:
+            self.process.stop()
+            self.process = None

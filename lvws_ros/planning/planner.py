@@ -1,0 +1,305 @@
+"""The planner: one whole plan from the current state, made at once and improved while
+there is time.
+
+:class:`Planner` holds an incumbent plan (a whole schedule from its state, carried out by
+:class:`~lvws_ros.planning.follow.PlanFollower`) and improves it in rounds:
+
+1. **quick plans** from the state: GRP in critical-path order, GRP, LVWS (each a whole
+   schedule; each within the deadline, in that order: the cheapest first); the shortest
+   is the incumbent;
+2. **improvement rounds**, in turn: CP-SAT on the whole rest, warm-started from the
+   incumbent, while at most ``exact_tasks`` tasks are left to do (a proof of optimality
+   ends the improvement); otherwise large-neighbourhood search on the incumbent
+   (:func:`~lvws_ros.policies.lns.improve`, travel and the way home included) for a slice
+   of time; and every third round, when LVWS's quick plan fitted in a slice, a round of
+   LVWS sampling (:func:`~lvws_ros.learning.sampling.sample_schedules`) at a temperature
+   that shrinks with the tasks to do (:func:`sampling_temperature`: a hot sample of 500
+   tasks is worse than LVWS's own).
+
+Every candidate is carried out by the executor from the plan's state
+(:func:`~lvws_ros.planning.follow.repair`, Eqs. 8-11 checked at every step) and replaces
+the incumbent only when shorter: the plan never gets longer, except when the world does
+(:meth:`Planner.rebase` on an event). :meth:`Planner.report` gives the plan's makespan,
+the lower bound (:func:`~lvws_ros.core.bounds.lower_bounds`, or CP-SAT's where it is
+stronger) and the gap. With ``iterations`` instead of a time limit (:meth:`Planner.run`),
+every solver call is limited by CP-SAT's deterministic time on one worker and sampling
+rounds have a fixed size: the same seed gives the same plan on every run.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lvws_ros.core.bounds import gap, lower_bounds
+from lvws_ros.core.executor import Policy, SimulationResult, State, schedule_from_state, simulate
+from lvws_ros.core.problem import Instance
+from lvws_ros.core.schedule import Schedule
+from lvws_ros.core.subteams import TOLERANCE
+from lvws_ros.errors import ExpertError, PolicyError
+from lvws_ros.learning.policies import LVWSPolicy, OutOfTime, Until
+from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, RoundCost, sample_schedules
+from lvws_ros.planning.follow import repair
+from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+EXACT_TASKS = 60  # CP-SAT on the whole rest while at most this many tasks are left to do
+SLICE = 2.0  # seconds of one improvement round (the planner looks for news between rounds)
+WORK = 1.0  # CP-SAT's deterministic time of one solve when rounds are counted, not timed
+LNS_WINDOWS = 4  # neighbourhoods of one LNS round when rounds are counted
+SAMPLE_EVERY = 3  # every this many improvement rounds, one of LVWS sampling
+TEMPERATURE_TASKS = 20  # sampling_temperature: the default temperature up to this many tasks to do
+
+__all__ = ["EXACT_TASKS", "Plan", "PlanReport", "Planner", "sampling_temperature"]
+
+
+def sampling_temperature(todo: int, base: float = DEFAULT_TEMPERATURE) -> float:
+    """The temperature of LVWS sampling from a state with ``todo`` tasks to do: ``base``
+    (chosen on the small cells of training) up to TEMPERATURE_TASKS tasks, then shrinking
+    as 1 / tasks (the noise of one decision adds up over the decisions of a whole schedule:
+    at fleet scale the default temperature samples only schedules worse than LVWS's own)."""
+    return base * min(1.0, TEMPERATURE_TASKS / max(1, todo))
+
+
+@dataclass
+class Plan:
+    """A whole schedule from ``state`` on, as the executor carries it out."""
+
+    state: State
+    schedule: Schedule
+    makespan: float
+    source: str  # the quick plan or improver that made it
+
+
+@dataclass
+class PlanReport:
+    makespan: float
+    bound: float
+    gap: float
+    source: str
+    proven: bool
+    seconds: float  # since the planner started from this cell
+    rounds: int  # improvement rounds so far
+    improved: dict[str, int] = field(default_factory=dict)  # times each improver shortened the plan
+
+
+class Planner:
+    """Holds one plan and improves it (module docstring). ``learned``: LVWS among the quick
+    plans and the sampler (False: GRP's alone, no torch at all)."""
+
+    def __init__(self, model_path: str | Path | None = None, seed: int = 0, workers: int = 8,
+                 exact_tasks: int = EXACT_TASKS, learned: bool = True, samples: int = DEFAULT_SAMPLES,
+                 slice_seconds: float = SLICE) -> None:
+        self.model_path, self.seed, self.workers = model_path, seed, workers
+        self.exact_tasks, self.learned, self.samples, self.slice = exact_tasks, learned, samples, slice_seconds
+        self._lvws: LVWSPolicy | None = None
+        self.plan: Plan | None = None
+        self.proven = False
+        self.exact_closed = False  # CP-SAT proved its model's optimum from the plan's state
+        self.bound = self.base_bound = 0.0  # the plan's lower bound; the cell's (lower_bounds)
+        self.rounds = 0
+        self.improved: dict[str, int] = {}
+        self.rng = np.random.default_rng(seed)
+        self.round_cost = RoundCost()
+        self.lvws_seconds = math.inf  # what LVWS's quick plan took last (sampling costs as much per schedule)
+        self.counted = False  # rounds counted, not timed (deterministic)
+        self.quick_makespan = math.nan  # the best quick plan's, from the latest state they were made from
+        self.started = time.perf_counter()
+        self._instance: Instance | None = None
+        self._quick: list[tuple[str, Callable[[], Policy]]] = [
+            ("grp-critical-path", lambda: GreedyPayloadPolicy(priority="critical-path")),
+            ("grp", GreedyPayloadPolicy)]
+        if learned:
+            self._quick.append(("lvws", self.lvws))
+
+    def lvws(self) -> LVWSPolicy:
+        """The LVWS policy (loaded once, on first use)."""
+        if self._lvws is None:
+            self._lvws = LVWSPolicy(model_path=self.model_path)
+        return self._lvws
+
+    # -- the incumbent -------------------------------------------------------------------
+
+    def offer(self, result: SimulationResult, state: State, source: str) -> bool:
+        """Make ``result`` (a run from ``state``) the plan when it is shorter (True then)."""
+        makespan = float(result.schedule.makespan)
+        if self.plan is not None and self.plan.state is state and makespan >= self.plan.makespan - TOLERANCE:
+            return False
+        self.plan = Plan(state, result.schedule, makespan, source)
+        return True
+
+    def offer_schedule(self, schedule: Schedule, source: str) -> bool:
+        """A schedule from an improver, carried out by the executor from the plan's state;
+        kept when shorter."""
+        assert self.plan is not None
+        try:
+            res = repair(self.plan.state, schedule)
+        except PolicyError:
+            return False
+        if self.offer(res, self.plan.state, source):
+            self.improved[source] = self.improved.get(source, 0) + 1
+            return True
+        return False
+
+    def report(self) -> PlanReport:
+        makespan = self.plan.makespan if self.plan is not None else math.nan
+        bound = makespan if self.proven else self.bound
+        return PlanReport(makespan, bound, gap(makespan, bound) if self.plan is not None else math.nan,
+                          self.plan.source if self.plan is not None else "", self.proven,
+                          time.perf_counter() - self.started, self.rounds, dict(self.improved))
+
+    # -- from a state ----------------------------------------------------------------------
+
+    def rebase(self, state: State, deadline: float | None = None, quick: bool = True) -> bool:
+        """Plan from ``state`` on: the incumbent carried out from there (its orders and
+        subteams that still hold, re-timed; what is new or broken planned by GRP). On a new
+        cell, or when that made the plan longer (the world departed from it), the quick
+        plans are due: made here when ``quick`` (the shortest wins). Returns whether they
+        were due."""
+        state = state.copy()
+        old = self.plan
+        self.exact_closed = False
+        new_cell = self._instance is not state.instance
+        if new_cell:
+            self._instance = state.instance
+            self.base_bound = lower_bounds(state.instance).best
+        self.plan = None
+        if old is not None:
+            try:
+                self.offer(repair(state, old.schedule), state, old.source)
+            except PolicyError:
+                pass
+        due = self.plan is None or old is None or new_cell or self.plan.makespan > old.makespan + TOLERANCE
+        if due:
+            self.proven, self.bound = False, self.base_bound  # the world departed: CP-SAT's bound no longer holds
+        if due and quick:
+            self.quick_plans(state, deadline)
+        if self.plan is None:  # nothing yet (or not even a quick plan fitted): GRP's, however long it takes
+            name, make = self._quick[0]
+            self.offer(simulate(state.instance, make(), state=state), state, name)
+        return due
+
+    def quick_plans(self, state: State, deadline: float | None) -> None:
+        """The quick plans from ``state``, each within ``deadline`` (a perf_counter time)."""
+        for name, make in self._quick:
+            if deadline is not None and time.perf_counter() >= deadline:
+                return
+            if self.plan is not None and self.plan.state is state and self.plan.source == name:
+                continue  # made already
+            t0 = time.perf_counter()
+            policy = make()
+            try:
+                res = simulate(state.instance, policy if deadline is None else Until(policy, deadline), state=state)
+            except (OutOfTime, PolicyError):
+                continue
+            if name == "lvws":
+                self.lvws_seconds = time.perf_counter() - t0
+                self.round_cost.add(len(state.tasks_to_do()), 1, self.lvws_seconds)
+            self.offer(res, state, name)
+        if self.plan is not None:
+            self.quick_makespan = self.plan.makespan
+
+    # -- improvement -------------------------------------------------------------------------
+
+    def improve(self, deadline: float | None = None) -> bool:
+        """One improvement round within ``deadline`` (None: counted, not timed); True when
+        it shortened the plan."""
+        if self.plan is None or self.proven:
+            return False
+        self.rounds += 1
+        state = self.plan.state
+        todo = len(state.tasks_to_do())
+        if not todo:
+            self.proven = True
+            return False
+        end = time.perf_counter() + self.slice if deadline is None else min(deadline, time.perf_counter() + self.slice)
+        if self.learned and self.rounds % SAMPLE_EVERY == 0 and self.lvws_seconds < self.slice:
+            return self._sample(state, todo, end)
+        if todo <= self.exact_tasks and not self.exact_closed:
+            return self._exact(state, end, deadline)
+        return self._lns(state, end)
+
+    def _exact(self, state: State, end: float, deadline: float | None) -> bool:
+        from lvws_ros.policies.exact import proves_executor_bound, solve_exact
+
+        assert self.plan is not None
+        left = (deadline if deadline is not None else end) - time.perf_counter()  # the whole rest: all the time
+        try:
+            res = solve_exact(state.instance, state=state, time_limit=max(0.05, left), hint=self.plan.schedule,
+                              workers=1 if self.counted else self.workers, seed=self.seed + self.rounds,
+                              work=WORK if self.counted else None)
+        except ExpertError:
+            return False
+        if res.schedule is None:
+            return False
+        shorter = self.offer_schedule(res.schedule, "exact")
+        self.exact_closed = res.proven  # optimal in CP-SAT's model: solving it again gives nothing new
+        if res.proven and proves_executor_bound(state.instance, res) \
+                and abs(float(res.schedule.makespan) - self.plan.makespan) <= TOLERANCE:
+            self.proven = True
+        elif proves_executor_bound(state.instance, res):
+            self.bound = max(self.bound, float(res.bound))
+        return shorter
+
+    def _lns(self, state: State, end: float) -> bool:
+        from lvws_ros.policies.lns import improve
+
+        assert self.plan is not None
+        try:
+            found = improve(state.instance, self.plan.schedule, state=state, workers=1,
+                            time_limit=math.inf if self.counted else max(0.0, end - time.perf_counter()),
+                            max_rounds=LNS_WINDOWS if self.counted else None,
+                            seed=self.seed + self.rounds, bound=self.bound)
+        except ExpertError:
+            return False
+        return bool(found.improved) and self.offer_schedule(found.schedule, "lns")
+
+    def _sample(self, state: State, todo: int, end: float) -> bool:
+        assert self.plan is not None
+        count = self.samples if self.counted else self.round_cost.count(todo, end - time.perf_counter(), self.samples)
+        if not count:
+            return False
+        t0 = time.perf_counter()
+        try:
+            found = sample_schedules(self.lvws(), state, count, sampling_temperature(todo), self.rng,
+                                     deadline=None if self.counted else end)
+        except PolicyError:
+            return False
+        if not self.counted and time.perf_counter() <= end:
+            self.round_cost.add(todo, count, time.perf_counter() - t0)
+        best = min(found, key=lambda s: s.makespan, default=None)
+        if best is None or best.makespan >= self.plan.makespan - TOLERANCE:
+            return False
+        return self.offer_schedule(schedule_from_state(best.final, "lvws-sample"), "sample")
+
+    # -- a whole run -------------------------------------------------------------------------
+
+    def run(self, state: State, time_limit: float | None = None, iterations: int | None = None,
+            on_report: Callable[[PlanReport], Any] | None = None) -> PlanReport:
+        """Plan from ``state`` for ``time_limit`` seconds in all (quick plans included) or
+        ``iterations`` improvement rounds (deterministic), whichever ends first; earlier
+        when the plan is proven optimal or reaches the bound. ``on_report`` hears every
+        improvement."""
+        if time_limit is None and iterations is None:
+            raise PolicyError("planner: give a time limit or a number of iterations")
+        self.started = time.perf_counter()
+        self.counted = iterations is not None and time_limit is None
+        deadline = None if time_limit is None else self.started + time_limit
+        self.rebase(state, deadline)
+        if on_report is not None:
+            on_report(self.report())
+        while not self.proven and (iterations is None or self.rounds < iterations):
+            if deadline is not None and time.perf_counter() >= deadline - 0.05:
+                break
+            assert self.plan is not None
+            if self.plan.makespan <= self.bound + TOLERANCE:
+                self.proven = True  # at the lower bound: optimal
+                break
+            if self.improve(deadline) and on_report is not None:
+                on_report(self.report())
+        return self.report()
