@@ -12,8 +12,9 @@ Two ways to run it:
   decision up: each decision takes the newest plan that has arrived and dispatches from it at
   once (milliseconds), then hands the state after the decision to the planner, which repairs
   its plan from there and goes on improving it. Before the first plan of a cell has arrived,
-  a decision waits for it at most ``first_wait`` seconds (after the process has started, at
-most READY_WAIT: its imports and the model's loading), then is GRP's. If the planner's
+  a decision waits for it at most ``first_wait`` seconds, then is GRP's (the process is
+started with the policy, a node's configure, so that its imports and the model's loading
+are done by then). If the planner's
   process dies, the decision is GRP's, a notice says so (the node puts it on
   ``diagnostics`` as a WARN) and the process is started again.
 
@@ -37,7 +38,6 @@ from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 DEFAULT_TIME_LIMIT = 60.0  # seconds of planning offline
 FIRST_WAIT = 1.0  # seconds a decision waits for the first plan of a cell from the planner's process
-READY_WAIT = 30.0  # seconds the first decision waits for the planner's process to start (imports, model)
 
 __all__ = ["DEFAULT_TIME_LIMIT", "FIRST_WAIT", "PlannedAutoPolicy"]
 
@@ -67,6 +67,9 @@ class PlannedAutoPolicy:
         self.quick_makespan = float("nan")
         self.improved: dict[str, int] = {}
         self._cell: Instance | None = None
+        if background:  # started now (a node's configure), so that it is ready when the cell's first state comes
+            self.process = PlannerProcess(**self.options)
+            self.process.start()
 
     @property
     def planned_makespan(self) -> float:
@@ -112,8 +115,8 @@ class PlannedAutoPolicy:
             self._cell = state.instance
             self.process.send(state)
         if self.follower is None and new_cell:  # the cell's first plan: the best within first_wait
-            self.process.wait_ready(READY_WAIT)
             end = time.perf_counter() + self.first_wait
+            self.process.wait_ready(self.first_wait)
             while (left := end - time.perf_counter()) > 0 and (update := self.process.latest(left)) is not None:
                 self._take(update)
                 if update.report.proven:
@@ -128,6 +131,15 @@ class PlannedAutoPolicy:
             after.start(task, team)
         self.process.send(after)
         return decision
+
+    def status_values(self) -> list[tuple[str, str]]:
+        """The plan as of the latest decision, for a node's diagnostics."""
+        r = self.report
+        if r is None:
+            return [("plan", "none yet"), ("planner_restarts", str(self.restarts))]
+        return [("plan_makespan", f"{r.makespan:g}"), ("plan_bound", f"{r.bound:g}"), ("plan_gap", f"{r.gap:.4f}"),
+                ("plan_source", r.source), ("plan_proven", str(r.proven).lower()),
+                ("planner_restarts", str(self.restarts))]
 
     def close(self) -> None:
         """Stop the planner's process (the node's cleanup and shutdown)."""

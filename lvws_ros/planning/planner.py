@@ -50,6 +50,7 @@ from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 EXACT_TASKS = 60  # CP-SAT on the whole rest while at most this many tasks are left to do
 SLICE = 2.0  # seconds of one improvement round (the planner looks for news between rounds)
+EXACT_FIRST = 0.25  # seconds of the first CP-SAT solve of an open-ended planner (then doubled, up to SLICE)
 WORK = 1.0  # CP-SAT's deterministic time of one solve when rounds are counted, not timed
 LNS_WINDOWS = 4  # neighbourhoods of one LNS round when rounds are counted
 SAMPLE_EVERY = 3  # every this many improvement rounds, one of LVWS sampling
@@ -101,6 +102,8 @@ class Planner:
         self.plan: Plan | None = None
         self.proven = False
         self.exact_closed = False  # CP-SAT proved its model's optimum from the plan's state
+        self.exact_rounds = 0  # CP-SAT solves from the plan's state
+        self.open_ended = False  # improving until told otherwise (a process beside a node), not to a deadline
         self.bound = self.base_bound = 0.0  # the plan's lower bound; the cell's (lower_bounds)
         self.rounds = 0
         self.improved: dict[str, int] = {}
@@ -163,7 +166,7 @@ class Planner:
         were due."""
         state = state.copy()
         old = self.plan
-        self.exact_closed = False
+        self.exact_closed, self.exact_rounds = False, 0
         new_cell = self._instance is not state.instance
         if new_cell:
             self._instance = state.instance
@@ -228,7 +231,11 @@ class Planner:
         from lvws_ros.policies.exact import proves_executor_bound, solve_exact
 
         assert self.plan is not None
-        left = (deadline if deadline is not None else end) - time.perf_counter()  # the whole rest: all the time
+        # the whole rest: all the time there is, or (a planner without a deadline) slices that
+        # double from EXACT_FIRST, each warm-started from the plan
+        left = (deadline - time.perf_counter()) if deadline is not None and not self.open_ended \
+            else min(end - time.perf_counter(), EXACT_FIRST * 2 ** self.exact_rounds)
+        self.exact_rounds += 1
         try:
             res = solve_exact(state.instance, state=state, time_limit=max(0.05, left), hint=self.plan.schedule,
                               workers=1 if self.counted else self.workers, seed=self.seed + self.rounds,

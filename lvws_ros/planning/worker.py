@@ -63,6 +63,7 @@ def _state(inst: Instance, p: StatePayload) -> State:
 def _serve(conn: Connection, options: dict[str, Any], parent: int) -> None:
     """The child's loop (module docstring)."""
     planner = Planner(**options)
+    planner.open_ended = True
     if planner.learned:
         planner.lvws()  # the model loaded before the first state comes
     conn.send(("ready",))

@@ -516,6 +516,9 @@ class SchedulerNode(LifecycleNode):
             ("out_of_order_dropped", core.dropped if core else 0), ("world_restarts", core.restarts if core else 0),
             ("pending", len(core.pending) if core else 0), ("fallback_steps", core.fallbacks if core else 0),
             ("lifecycle", "active" if self.active else "inactive" if core is not None else "unconfigured"))]
+        planned = getattr(core.policy, "status_values", None) if core is not None else None
+        if callable(planned):  # auto's planner: the plan's makespan, bound and gap as of the latest decision
+            status.values += [KeyValue(key=k, value=str(v)) for k, v in planned()]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)
