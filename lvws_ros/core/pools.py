@@ -30,7 +30,7 @@ from lvws_ros.core.subteams import FloatArray, IntArray
 if TYPE_CHECKING:
     from lvws_ros.core.executor import State
 
-__all__ = ["Pool", "pool_index", "pools", "trivial"]
+__all__ = ["Pool", "assign_units", "pool_index", "pools", "trivial"]
 
 
 @dataclass(frozen=True)
@@ -81,3 +81,25 @@ def pool_index(inst: Instance, found: Sequence[Pool]) -> IntArray:
 def trivial(found: Sequence[Pool]) -> bool:
     """Whether every pool holds one robot (no two robots are the same for the plan)."""
     return all(pool.size == 1 for pool in found)
+
+
+def assign_units(robots: Sequence[int], free_at: Sequence[float], uses: Sequence[tuple[float, float, int]],
+                 tol: float = 1e-6) -> list[tuple[int, ...]]:
+    """Individual robots of one pool for counts on intervals: ``uses`` holds per task its
+    (start, end, count); ``free_at`` when each of ``robots`` is free. Tasks are taken by
+    start time, each given the free robots (free at its start) in index order. For
+    identical robots on intervals this always succeeds when the counts fit the pool at
+    every time (the cumulative of the pool model), a busy robot counting from now until
+    it is free: the robots busy at a start are exactly the uses and releases running
+    then. ValueError when they do not fit."""
+    free = dict(zip(robots, free_at, strict=True))
+    out: list[tuple[int, ...]] = [() for _ in uses]
+    for k in sorted(range(len(uses)), key=lambda k: (uses[k][0], k)):
+        start, end, count = uses[k]
+        ready = [r for r in robots if free[r] <= start + tol]
+        if len(ready) < count:
+            raise ValueError(f"{count} robots wanted at {start:g}, {len(ready)} free")
+        out[k] = tuple(ready[:count])
+        for r in out[k]:
+            free[r] = end
+    return out

@@ -19,6 +19,19 @@ Model (per remaining task j, start S_j):
     use), start windows from longest paths before/after each task, and a hint from the
     best heuristic schedule, which also bounds the horizon.
 
+When some robots are interchangeable (:mod:`~lvws_ros.core.pools`: the same trait
+amounts and payload) and there is no travel, the *pool model* replaces the per-robot one:
+per task an integer count per pool (at most what an inclusion-minimal subteam holds)
+whose summed amounts cover it (with roles, counts per pool and required trait, a
+matching of members to required units), per pool a cumulative over the tasks' intervals
+with the counts as demands and the pool's size as capacity (a busy robot holds one unit
+until it is free), precedence and makespan as above. It has none of the per-robot
+model's symmetric copies (a task needing 5 of 40 identical robots is one count, not
+C(40, 5) subteams). The individual robots are given afterwards, exactly: for identical
+units on intervals every feasible cumulative has an assignment, found by giving each
+task, by start time, free robots of the pool. :attr:`ExpertResult.model` says which
+model was solved.
+
 It also solves from a mid-run :class:`~lvws_ros.core.executor.State`: tasks done or in
 progress stay as they are, busy robots are free only from their given time on, and
 nothing new starts before the state's time.
@@ -52,6 +65,7 @@ from lvws_ros.core.executor import (
     simulate,
 )
 from lvws_ros.core.matching import Match, check_shapes, match_reward
+from lvws_ros.core.pools import Pool, assign_units, pools, trivial
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.subteams import (
@@ -79,6 +93,7 @@ class ExpertResult:
     bound: float
     seconds: float
     exact_scale: bool
+    model: str = ""  # the formulation solved: coalition | boolean | pool ("" when nothing was left to place)
 
     @property
     def proven(self) -> bool:
@@ -541,6 +556,146 @@ def _solution(inst: Instance, state: State, h: _Horizon, m: _Model, solver: cp_m
     return left_shift(inst, Schedule.from_assignments(inst, "exact", out), state)
 
 
+def _pool_bound(inst: Instance, j: int, pool: Pool) -> int:
+    """The most members of ``pool`` an inclusion-minimal covering subteam of task ``j``
+    holds: past it a member of the pool is never needed. Without roles, the members
+    the pool needs to cover alone what it helps with (each trait it holds and the
+    payload); with roles (a member fills one slot) the sum of those."""
+    need, amt = inst.task_needs[j], np.array(pool.amounts)
+    each = [int(np.ceil((need[c] - TOLERANCE) / amt[c])) for c in np.flatnonzero((need > TOLERANCE) & (amt > 0))]
+    if inst.tasks[j].payload > TOLERANCE and pool.payload > 0:
+        each.append(int(np.ceil((inst.tasks[j].payload - TOLERANCE) / pool.payload)))
+    return min(pool.size, sum(each) if inst.task_roles[j] else max(each, default=0))
+
+
+def _pool_cover(model: cp_model.CpModel, inst: Instance, j: int, found: Sequence[Pool], pay_int: np.ndarray,
+                need_int: np.ndarray) -> dict[int, cp_model.IntVar]:
+    """Task ``j``'s subteam as a count per pool (at most :func:`_pool_bound`) whose
+    amounts cover it (Eqs. 10-11, each trait in :func:`_units`' integers). With roles, a
+    count per pool and required trait of the members filling that trait's slots, at most
+    the pool's count in all: a matching of members to required units."""
+    need = inst.task_needs[j]
+    cols = [int(c) for c in np.flatnonzero(need > TOLERANCE)]
+    amounts = np.array([pool.amounts for pool in found]).reshape(len(found), len(need))
+    count: dict[int, cp_model.IntVar] = {}
+    for p, pool in enumerate(found):
+        bound = _pool_bound(inst, j, pool)
+        if bound > 0:
+            count[p] = model.new_int_var(0, bound, f"n_{j}_{p}")
+    give: dict[tuple[int, int], Any] = {(p, c): n for p, n in count.items() for c in cols}
+    if inst.task_roles[j]:
+        give = {(p, c): model.new_int_var(0, _upper(count[p]), f"g_{j}_{p}_{c}")
+                for p in count for c in cols if amounts[p, c] > 0}
+        for p, n in count.items():
+            model.add(sum(g for (q, _), g in give.items() if q == p) <= n)
+    for c in cols:
+        holders = [p for p in count if amounts[p, c] > 0]
+        if not holders:
+            raise ExpertError(f"task {inst.tasks[j].id!r}: no robot holds {inst.cover_names[c]}")
+        have, want = _units(amounts[:, c], need[c:c + 1])
+        model.add(sum(int(have[p]) * give[p, c] for p in holders) >= int(want[0]))
+    if need_int[j] > 0:  # Eq. 11
+        model.add(sum(int(pay_int[found[p].robots[0]]) * n for p, n in count.items()) >= int(need_int[j]))
+    return count
+
+
+def _upper(var: cp_model.IntVar) -> int:
+    """The largest value of an integer variable's domain."""
+    domain = var.proto.domain
+    return int(domain[len(domain) - 1])
+
+
+@dataclass
+class _PoolModel:
+    model: cp_model.CpModel
+    start: dict[int, cp_model.IntVar]
+    count: dict[int, dict[int, cp_model.IntVar]]  # task -> pool -> members of the pool in its subteam
+    makespan: cp_model.IntVar
+
+
+def _build_pool_model(inst: Instance, h: _Horizon, found: Sequence[Pool], now: int) -> _PoolModel:
+    """The model over pools (no travel): per task its start and a count per pool
+    (:func:`_pool_cover`); per pool a cumulative over the tasks' intervals with the counts
+    as demands and the pool's size as capacity, each busy member holding one unit from
+    ``now`` until it is free; precedence and the makespan as in the other formulations."""
+    model = cp_model.CpModel()
+    start = {j: model.new_int_var(h.head[j], h.upper - h.tail[j], f"S_{j}") for j in h.todo}
+    makespan = model.new_int_var(h.lower, h.upper, "C")
+    pay_int, need_int = _payload_units(inst)
+    count = {j: _pool_cover(model, inst, j, found, pay_int, need_int) for j in h.todo}
+    _sequencing(model, inst, h, start, makespan, [])
+    task_iv = {j: model.new_fixed_size_interval_var(start[j], h.dur[j], f"I_{j}") for j in h.todo}
+    for p, pool in enumerate(found):
+        ivs = [task_iv[j] for j in h.todo if p in count[j]]
+        demands: list[Any] = [count[j][p] for j in h.todo if p in count[j]]
+        for r in pool.robots:  # busy: one unit held until the robot is free
+            if h.free_at[r] > now:
+                ivs.append(model.new_fixed_size_interval_var(now, h.free_at[r] - now, f"busy_{r}"))
+                demands.append(1)
+        if ivs:
+            model.add_cumulative(ivs, demands, pool.size)
+    model.minimize(makespan)
+    return _PoolModel(model, start, count, makespan)
+
+
+def _hint_pools(inst: Instance, h: _Horizon, m: _PoolModel, found: Sequence[Pool], hint: Schedule) -> None:
+    """Hint the pool model with the left-shifted heuristic schedule: starts and counts."""
+    by_task = hint.by_task()
+    of = {r: p for p, pool in enumerate(found) for r in pool.robots}
+    for j in h.todo:
+        a = by_task.get(inst.tasks[j].id)
+        if a is None:
+            continue
+        m.model.add_hint(m.start[j], min(max(h.ticks(a.start), h.head[j]), h.upper - h.tail[j]))
+        used = [of[inst.robot_index[r]] for r in a.robots]
+        for p, n in m.count[j].items():
+            m.model.add_hint(n, min(used.count(p), _upper(n)))
+    m.model.add_hint(m.makespan, h.upper)
+
+
+def _pool_solution(inst: Instance, state: State, h: _Horizon, m: _PoolModel, found: Sequence[Pool],
+                   solver: cp_model.CpSolver) -> Schedule:
+    """The robots of each pool given exactly (:func:`~lvws_ros.core.pools.assign_units`),
+    each subteam checked to cover and cut down to a minimal one, then left-shifted."""
+    teams: dict[int, list[int]] = {j: [] for j in h.todo}
+    for p, pool in enumerate(found):
+        tasks = [j for j in h.todo if p in m.count[j] and solver.value(m.count[j][p]) > 0]
+        uses = [(float(solver.value(m.start[j])), float(solver.value(m.start[j]) + h.dur[j]),
+                 int(solver.value(m.count[j][p]))) for j in tasks]
+        try:
+            given = assign_units(pool.robots, [float(h.free_at[r]) for r in pool.robots], uses, tol=0.0)
+        except ValueError as exc:
+            raise ExpertError(f"pool of {inst.robots[pool.robots[0]].id!r}: no robots for the counts ({exc})") from None
+        for j, robots in zip(tasks, given, strict=True):
+            teams[j] += robots
+    out = [Assignment(t.id, tuple(inst.robots[r].id for r in state.task_team[j]), float(state.task_start[j]),
+                      float(state.task_start[j]) + t.duration) for j, t in enumerate(inst.tasks) if j in h.fixed_end]
+    for j in h.todo:
+        t, team, roles = inst.tasks[j], teams[j], bool(inst.task_roles[j])
+        if not covers(inst.robot_amounts[team], inst.robot_payload[team], inst.task_needs[j], t.payload, roles):
+            raise ExpertError(f"task {t.id!r}: the pool model's subteam does not cover it (rounding)")
+        team = prune(team, inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload, roles=roles)
+        s0 = solver.value(m.start[j]) / h.scale
+        out.append(Assignment(t.id, tuple(inst.robots[r].id for r in sorted(team)), s0, s0 + t.duration))
+    return left_shift(inst, Schedule.from_assignments(inst, "exact", out), state)
+
+
+FORMULATIONS = ("auto", "coalition", "boolean", "pool")
+
+
+def chosen_formulation(inst: Instance, state: State | None = None, formulation: str = "auto") -> str:
+    """The formulation ``solve_exact`` solves: "pool" under "auto" when some robots are
+    interchangeable (:mod:`~lvws_ros.core.pools`) and there is no travel; else the
+    coalition model for small teams, the boolean one for large (:func:`_coalitions`)."""
+    if formulation not in FORMULATIONS:
+        raise ExpertError(f"unknown formulation {formulation!r} ({' | '.join(FORMULATIONS)})")
+    if formulation == "pool" and inst.travel is not None:
+        raise ExpertError("the pool model has no travel: use the coalition or boolean formulation")
+    if formulation == "auto" and inst.travel is None and not trivial(pools(inst, state)):
+        return "pool"
+    return formulation
+
+
 def solve_exact(
     inst: Instance,
     *,
@@ -556,12 +711,13 @@ def solve_exact(
 
     ``formulation``: "coalition" lists the minimal covering subteams of each task (fast
     for small teams), "boolean" uses a robot-task boolean per pair (any team size),
-    "auto" (default) takes the coalition model when the team has at most
-    MAX_ENUMERATED robots and the coalitions number at most COALITION_LIMIT. ``work``: a
-    limit of CP-SAT's deterministic time too (with ``workers`` = 1 the same result on every
-    run)."""
-    if formulation not in ("auto", "coalition", "boolean"):
-        raise ExpertError(f"unknown formulation {formulation!r} (auto | coalition | boolean)")
+    "pool" a count per pool of interchangeable robots and task (no travel), "auto"
+    (default) takes the pool model when some robots are interchangeable and there is no
+    travel, else the coalition model when the team has at most MAX_ENUMERATED robots and
+    the coalitions number at most COALITION_LIMIT. The result's ``model`` says which
+    was solved. ``work``: a limit of CP-SAT's deterministic time too (with ``workers`` =
+    1 the same result on every run)."""
+    formulation = chosen_formulation(inst, state, formulation)
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state.copy()
     state.refresh()
@@ -570,35 +726,42 @@ def solve_exact(
     if not todo:
         sched = schedule_from_state(state, "exact")
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
-    h = _horizon(inst, state, todo, hint, coalitions=formulation != "boolean")
-    m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
-    tv = _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
-    teams = _add_hint(inst, h, m, hint)
-    if tv is not None:
-        _hint_travel(inst, state, m.model, tv, hint, teams, h.ticks)
+    h = _horizon(inst, state, todo, hint, coalitions=formulation in ("auto", "coalition"))
+    if formulation == "pool":
+        found = pools(inst, state)
+        pm = _build_pool_model(inst, h, found, h.ticks(state.time))
+        _hint_pools(inst, h, pm, found, hint)
+        model, name = pm.model, "pool"
+    else:
+        m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
+        tv = _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
+        teams = _add_hint(inst, h, m, hint)
+        if tv is not None:
+            _hint_travel(inst, state, m.model, tv, hint, teams, h.ticks)
+        model, name = m.model, "coalition" if h.teams is not None else "boolean"
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
     solver.parameters.num_workers = workers
     solver.parameters.random_seed = seed
     if work is not None:
         solver.parameters.max_deterministic_time = work
-    code = solver.solve(m.model)
+    code = solver.solve(model)
     seconds = time.perf_counter() - t_start
-    found = code in (cp_model.OPTIMAL, cp_model.FEASIBLE)
-    bound = float(solver.best_objective_bound) / h.scale if found else h.lower / h.scale
+    found_one = code in (cp_model.OPTIMAL, cp_model.FEASIBLE)
+    bound = float(solver.best_objective_bound) / h.scale if found_one else h.lower / h.scale
     if code == cp_model.MODEL_INVALID:
-        raise ExpertError(f"invalid CP-SAT model: {m.model.validate()}")
+        raise ExpertError(f"invalid CP-SAT model: {model.validate()}")
     if code == cp_model.INFEASIBLE:
         raise ExpertError(f"CP-SAT proved the model infeasible for {inst.name!r}; the hint schedule contradicts it")
-    if not found:
-        return ExpertResult(hint, "unknown", hint.makespan, bound, seconds, h.exact_scale)
-    sched = _solution(inst, state, h, m, solver)
+    if not found_one:
+        return ExpertResult(hint, "unknown", hint.makespan, bound, seconds, h.exact_scale, name)
+    sched = _pool_solution(inst, state, h, pm, found, solver) if name == "pool" else _solution(inst, state, h, m, solver)
     # With rounded durations (no exact scale) the real-time schedule is valid, not proven optimal.
     status = "optimal" if code == cp_model.OPTIMAL and h.exact_scale else "feasible"
     if status == "optimal":
         bound = sched.makespan
     sched.compute_seconds = seconds
-    return ExpertResult(sched, status, sched.makespan, min(bound, sched.makespan), seconds, h.exact_scale)
+    return ExpertResult(sched, status, sched.makespan, min(bound, sched.makespan), seconds, h.exact_scale, name)
 
 
 def _demand(model: cp_model.CpModel, values: list[int], choice: Sequence[cp_model.IntVar], name: str) -> cp_model.IntVar:

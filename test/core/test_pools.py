@@ -101,3 +101,18 @@ def test_files_without_identical_robots_give_singleton_pools() -> None:
     twin = replace(inst.robots[0], id="twin")
     doubled = replace(inst, robots=(*inst.robots, twin))
     assert (0, inst.num_robots) in [p.robots for p in pools(doubled)]
+
+
+def test_assign_units_gives_free_robots_by_start_time() -> None:
+    from lvws_ros.core.pools import assign_units
+
+    # three robots, robot 12 busy until 4; counts that fit the pool at every time
+    uses = [(0.0, 5.0, 2), (5.0, 7.0, 3), (4.0, 5.0, 1), (0.0, 3.0, 0)]
+    got = assign_units([10, 11, 12], [0.0, 0.0, 4.0], uses)
+    assert got == [(10, 11), (10, 11, 12), (12,), ()]
+    for (s, e, _), team in zip(uses, got, strict=True):  # no robot in two tasks at once
+        for (s2, e2, _), team2 in zip(uses, got, strict=True):
+            if (s, e) != (s2, e2) and s < e2 and s2 < e:
+                assert not set(team) & set(team2)
+    with pytest.raises(ValueError, match="2 robots wanted at 1, 1 free"):
+        assign_units([10, 11, 12], [0.0, 0.0, 4.0], [(0.0, 5.0, 1), (1.0, 2.0, 2)])
