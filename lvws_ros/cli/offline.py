@@ -177,6 +177,25 @@ def _evaluate_paper(args: argparse.Namespace, chosen: list[str]) -> int:
     return 0
 
 
+def _evaluate_psplib(args: argparse.Namespace) -> int:
+    import time
+
+    from lvws_ros.cli.paper import psplib_rows, psplib_table
+
+    folder = Path(args.psplib)
+    if not folder.is_dir():
+        raise InstanceError(f"{folder}: not a folder of PSPLIB files (.sm, .rcp)")
+    t0 = time.perf_counter()
+    rows = psplib_rows(folder, args.time_limit, args.workers, progress=not args.quiet)
+    text = "\n".join(psplib_table(rows, args.time_limit, args.workers, time.perf_counter() - t0)) + "\n"
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "psplib.md").write_text(text)
+    print(text)
+    print(f"written: {out / 'psplib.md'}", file=sys.stderr)
+    return 0
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -187,6 +206,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     chosen = [p.strip() for p in (args.policies or "").split(",") if p.strip()]
     if args.paper:
         return _evaluate_paper(args, chosen)
+    if args.psplib:
+        return _evaluate_psplib(args)
     if not args.instances:
         raise InstanceError("give instance files or folders, or --paper")
     instances = _instances(args.instances)
@@ -416,6 +437,10 @@ def _add_evaluate(add: Adder) -> None:
     p.add_argument("instances", nargs="*", help="instance files or folders")
     p.add_argument("--paper", action="store_true",
                    help="regenerate the paper's Tables I and II and our Table III (travel) on our datasets into --out-md")
+    p.add_argument("--psplib", nargs="?", const="examples/psplib", default=None, metavar="DIR",
+                   help="the PSPLIB table: each .sm/.rcp file of DIR (default: examples/psplib) solved by GRP, the "
+                        "exact expert and a plain cumulative CP-SAT model at --time-limit each, beside the published "
+                        "optima of DIR/optima.csv; written to --out-dir/psplib.md")
     p.add_argument("--out-md", default="docs/results.md", help="with --paper: the markdown report")
     p.add_argument("--data-seed", type=int, default=0, help="with --paper: dataset seed")
     p.add_argument("--limit", type=int, default=None, help="with --paper: first LIMIT test instances per dataset")
