@@ -117,9 +117,11 @@ def cmd_solve(args: argparse.Namespace) -> int:
               f"{run.decisions} decisions", file=sys.stderr)
         result.schedule.extra.update({"noise": args.noise, "noise_seed": args.noise_seed,
                                       "executed_makespan": run.executed.makespan})
-    if args.out:
+    if args.out:  # --out is where the schedule goes: stdout then carries none
         save_schedule(result.schedule, args.out)
-    sys.stdout.write(dumps(schedule_to_dict(result.schedule)))
+        print(f"written: {args.out}", file=sys.stderr)
+    else:
+        sys.stdout.write(dumps(schedule_to_dict(result.schedule)))
     return 0
 
 
@@ -381,7 +383,8 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--count", type=int, default=None, help="only the first COUNT instances")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    p = add("solve", cmd_solve, "schedule an instance with a policy; prints lvws-schedule/1 JSON")
+    p = add("solve", cmd_solve, "schedule an instance with a policy; prints lvws-schedule/1 JSON (to --out instead "
+            "when given)")
     p.add_argument("instance")
     p.add_argument("--policy", choices=POLICY_NAMES, default="grp")
     p.add_argument("--seed", type=int, default=0)
@@ -405,7 +408,7 @@ def add_parsers(add: Adder) -> None:
                    help="also run the policy online in a world where each task takes its duration x a seeded "
                         "factor in [1-NOISE, 1+NOISE] and print planned against executed makespan")
     p.add_argument("--noise-seed", type=int, default=0, help="the noise's seed (with --noise)")
-    p.add_argument("--out", help="also write the schedule to this file")
+    p.add_argument("--out", help="write the schedule to this file instead of stdout")
 
     p = add("import", cmd_import, "turn a multi-skill project scheduling file (MiniZinc data, .dzn), a PSPLIB "
                                    "project scheduling file (.sm or Patterson .rcp) or CSV files of robots and "

@@ -51,11 +51,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
         print(f"  plan (the executor on the cell's instance{', travel included' if sim.inst.travel else ''}): "
               f"{plan:.2f} s; executed - plan: {sched.makespan - plan:+.2f} s "
               f"({100 * (sched.makespan - plan) / plan:+.2f} %)")
-    for d in decisions:
+    if args.out:  # --out is where the schedule goes: stdout then carries no decision steps
+        save_schedule(sched, args.out)
+        print(f"written: {args.out}", file=sys.stderr)
+    for d in [] if args.out else decisions:
         made = ", ".join(f"{t}<-{'+'.join(r)}" for t, r in d.assignments) or "-"
         print(f"  step {d.step} t={d.team_stamp:.2f}: {made}; waiting {', '.join(d.waiting) or '-'}")
-    if args.out:
-        save_schedule(sched, args.out)
     if args.gif:
         from lvws_ros.sim.render import render_gif
 
@@ -195,7 +196,8 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--noise", type=float, default=0.0,
                    help="duration noise: each task takes its duration x a factor drawn in [1 - NOISE, 1 + NOISE] "
                         "from --seed and its id (0, default: exact durations; below 1)")
-    p.add_argument("--out", help="write the executed schedule (lvws-schedule/1) here")
+    p.add_argument("--out", help="write the executed schedule (lvws-schedule/1) here instead of its decision steps "
+                                  "on stdout")
     p.add_argument("--gif", help="write an animated GIF of the run here")
     p.add_argument("--frames", help="write a PNG per frame into this folder")
     p.add_argument("--frame-every", type=float, default=2.0, help="sim seconds between frames")

@@ -30,9 +30,10 @@ def test_help_on_every_verb(verb):
 def test_solve_check_gantt(tmp_path):
     out = tmp_path / "exact.json"
     res = lvws("solve", EXAMPLE, "--policy", "exact", "--workers", "2", "--out", out)
-    printed = json.loads(res.stdout)
+    assert res.stdout == ""  # --out is where the schedule goes
+    printed = json.loads(out.read_text())
     assert printed["format"] == "lvws-schedule/1" and printed["status"] == "optimal"
-    assert json.loads(out.read_text())["makespan"] == printed["makespan"]
+    assert "makespan" in res.stderr and f"written: {out}" in res.stderr  # the summary as without --out
     assert lvws("check", EXAMPLE, out).stdout.startswith("valid")
     grp = tmp_path / "grp.json"
     lvws("solve", EXAMPLE, "--policy", "grp", "--out", grp)
@@ -40,6 +41,20 @@ def test_solve_check_gantt(tmp_path):
     png = tmp_path / "gantt.png"
     lvws("gantt", out, "--instance", EXAMPLE, "--out", png)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+
+
+def test_out_means_the_file_and_stdout_the_schedule_without_it(tmp_path):
+    out = tmp_path / "grp.json"
+    written = lvws("solve", EXAMPLE, "--policy", "grp", "--out", out)
+    assert "{" not in written.stdout and "lvws-schedule" not in written.stdout  # no JSON on stdout
+    assert "gap" in written.stderr
+    assert lvws("check", EXAMPLE, out).stdout.startswith("valid")
+    printed = lvws("solve", EXAMPLE, "--policy", "grp")
+    same = json.loads(printed.stdout)
+    assert same["assignments"] == json.loads(out.read_text())["assignments"]  # without --out: the schedule, on stdout
+    sim = lvws("sim", "--policy", "grp", "--out", tmp_path / "sim.json")
+    assert "makespan" in sim.stdout and "step " not in sim.stdout  # the summary, not the decision steps
+    assert len(json.loads((tmp_path / "sim.json").read_text())["assignments"]) == 14
 
 
 def test_beam_search_solves_and_says_when_its_budget_left_it_to_lvws(tmp_path):
