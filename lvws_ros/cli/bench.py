@@ -7,7 +7,9 @@
 * the ROS runtime, and a dynamic world (scripted cancel, late order, failures, repairs):
   decision latency under events, replanning and restart after each failure;
 * scale (:mod:`lvws_ros.cli.bench_scale`): whole schedules at 100 x 500 and 1000 x 5000 on
-  our generator and a subteam-heavy family, node decision latency, the expert on large teams.
+  our generator and a subteam-heavy family, node decision latency, the expert on large teams;
+* anytime (:mod:`lvws_ros.cli.bench_anytime`): the planner's plan and its gap to the bound
+  against planning time at 100 x 500 and 1000 x 5000, beside GRP and LVWS (PNG).
 """
 
 from __future__ import annotations
@@ -331,7 +333,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-limit", type=float, default=60.0)
     parser.add_argument("--model", default=None, help="LVWS checkpoint for Fig. 5 (default: the shipped one)")
     parser.add_argument("--fig5-png", default="docs/fig5.png")
-    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale", "mspsp"], default=None)
+    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale", "anytime", "mspsp"],
+                        default=None)
+    parser.add_argument("--anytime-png", default="docs/scale_anytime.png")
+    parser.add_argument("--anytime-limit", type=float, default=60.0, help="seconds of planning per instance")
     parser.add_argument("--mspsp-dir", default=None,
                         help="a folder of multi-skill project scheduling files (.dzn, e.g. a checkout of the MSPSP "
                              "instance library's instances/set-1/set-1a): the exact expert on each (--only mspsp)")
@@ -351,6 +356,10 @@ def main(argv: list[str] | None = None) -> int:
         from lvws_ros.cli.bench_scale import main as bench_scale
 
         bench_scale(args.seed, args.scale_limit)
+    if args.only in (None, "anytime"):
+        from lvws_ros.cli.bench_anytime import main as bench_anytime
+
+        bench_anytime(args.seed, args.anytime_limit, args.anytime_png)
     if args.only in (None, "runtime"):
         bench_runtime()
     if args.only in (None, "dynamic"):

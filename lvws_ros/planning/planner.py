@@ -112,6 +112,7 @@ class Planner:
         self.lvws_seconds = math.inf  # what LVWS's quick plan took last (sampling costs as much per schedule)
         self.counted = False  # rounds counted, not timed (deterministic)
         self.quick_makespan = math.nan  # the best quick plan's, from the latest state they were made from
+        self.quick: dict[str, tuple[float, float]] = {}  # each quick plan's (makespan, seconds), latest made
         self.started = time.perf_counter()
         self._instance: Instance | None = None
         self._quick: list[tuple[str, Callable[[], Policy]]] = [
@@ -184,7 +185,10 @@ class Planner:
             self.quick_plans(state, deadline)
         if self.plan is None:  # nothing yet (or not even a quick plan fitted): GRP's, however long it takes
             name, make = self._quick[0]
-            self.offer(simulate(state.instance, make(), state=state), state, name)
+            t0 = time.perf_counter()
+            res = simulate(state.instance, make(), state=state)
+            self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
+            self.offer(res, state, name)
         return due
 
     def quick_plans(self, state: State, deadline: float | None) -> None:
@@ -203,6 +207,7 @@ class Planner:
             if name == "lvws":
                 self.lvws_seconds = time.perf_counter() - t0
                 self.round_cost.add(len(state.tasks_to_do()), 1, self.lvws_seconds)
+            self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
             self.offer(res, state, name)
         if self.plan is not None:
             self.quick_makespan = self.plan.makespan
