@@ -51,6 +51,9 @@ from lvws_ros.core.subteams import covered, covers
 from lvws_ros.core.travel import Travel, build_travel
 from lvws_ros.errors import InstanceError
 
+_STATUSES = frozenset(int(s) for s in TaskStatus)  # a plain set of ints: checked for every task of every graph
+_READY, _ASSIGNED, _DONE, _QUEUED = (int(s) for s in (TaskStatus.READY, TaskStatus.ASSIGNED, TaskStatus.DONE,
+                                                      TaskStatus.QUEUED))
 BUSY_EPS = 1e-3  # a busy robot with an overdue estimate is still busy
 RESTART_JUMP = 10.0  # seconds a stamp may go back before the world counts as restarted
 
@@ -174,7 +177,7 @@ def check_graph(snap: GraphSnapshot) -> None:
         raise InstanceError("TaskGraph tasks: ids must be unique and non-empty")
     for n, t in enumerate(snap.tasks):
         where = f"TaskGraph tasks[{n}] ({t.id!r})"
-        if t.status not in set(TaskStatus):
+        if t.status not in _STATUSES:
             raise InstanceError(f"{where}.status: {t.status} is not one of "
                                 + ", ".join(f"{s.name}={s.value}" for s in TaskStatus))
         _bits(t.capabilities, k, f"{where}.capabilities")
@@ -387,8 +390,8 @@ def unready(graph: GraphSnapshot) -> list[tuple[str, str]]:
     """(task, prerequisite) for each task the graph calls READY although a prerequisite
     is not DONE: such a task is not ready."""
     status = {t.id: t.status for t in graph.tasks}
-    return [(t.id, p) for t in graph.tasks if t.status == TaskStatus.READY
-            for p in t.prerequisites if status.get(p) != TaskStatus.DONE]
+    return [(t.id, p) for t in graph.tasks if t.status == _READY
+            for p in t.prerequisites if status.get(p) != _DONE]
 
 
 def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
@@ -397,11 +400,12 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
     assigned but not yet acknowledged) counted as running (the rules of the module doc)."""
     now = max(team.stamp, graph.stamp)
     m, n = inst.num_tasks, inst.num_robots
-    done = {t.id for t in graph.tasks if t.status == TaskStatus.DONE}
-    status = np.array([TaskStatus.QUEUED if t.status == TaskStatus.READY and not set(t.prerequisites) <= done
+    done = {t.id for t in graph.tasks if t.status == _DONE}
+    status = np.array([_QUEUED if t.status == _READY and not done.issuperset(t.prerequisites)
                        else t.status for t in graph.tasks], dtype=np.int8)
-    teams: list[tuple[int, ...]] = [tuple(inst.robot_index[r] for r in t.assigned_robots if r in inst.robot_index)
-                                    for t in graph.tasks]
+    index = inst.robot_index
+    teams: list[tuple[int, ...]] = [tuple(index[r] for r in t.assigned_robots if r in index) if t.assigned_robots
+                                    else () for t in graph.tasks]
     for tid, robots in pending.items():
         j = inst.task_index.get(tid)
         if j is not None and status[j] == TaskStatus.READY and all(r in inst.robot_index for r in robots):
@@ -417,8 +421,9 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
     tr = inst.travel
     own = _robot_sites(inst, team)  # where each robot says it is
     site = None if own is None else own.copy()  # and where it will be when its task is done
-    for j, t in enumerate(graph.tasks):
-        if status[j] == TaskStatus.ASSIGNED:
+    for j in np.flatnonzero(status >= _ASSIGNED).tolist():
+        t = graph.tasks[j]
+        if status[j] == _ASSIGNED:
             idx = list(teams[j])
             busy_until = [free_at[i] for i in idx if free_at[i] > now]
             # just assigned, or unacknowledged: the subteam travels first (travel extension)
@@ -428,7 +433,7 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
             start[j] = end - inst.durations[j]
             if tr is not None and site is not None:
                 site[idx] = tr.task_to[j]
-        elif status[j] == TaskStatus.DONE:
+        else:  # done
             start[j] = t.start if t.start is not None else now - inst.durations[j]
     return State(inst, now, free_at, status, start, teams, robot_site=site)
 
@@ -560,8 +565,8 @@ class OnlineScheduler:
                 self.changes.append(f"task(s) {', '.join(sorted(set(now) - set(before)))} added")
             if set(before) - set(now):
                 self.changes.append(f"task(s) {', '.join(sorted(set(before) - set(now)))} removed (cancelled)")
-            back = sorted(k for k, t in now.items() if t.status == TaskStatus.READY and not t.assigned_robots
-                          and k in before and before[k].status == TaskStatus.ASSIGNED)
+            back = sorted(k for k, t in now.items() if t.status == _READY and not t.assigned_robots
+                          and k in before and before[k].status == _ASSIGNED)
             if back:
                 self.notices.append(f"task(s) {', '.join(back)} interrupted: READY again, replanned")
         self.graph = snap

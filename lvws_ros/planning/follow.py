@@ -9,8 +9,8 @@ the executor or online, whatever happened since it was made:
   is free and the task is next in each member's order: the plan re-timed to what the world
   did (a task late or early moves what follows it, nothing more);
 * a task the plan cannot serve any more (new, or its subteam broken: a member lost, or a
-  subteam that no longer covers it or cannot reach it) is planned by GRP among the free
-  robots the plan has nothing left for;
+  subteam that no longer covers it, found when it is due, or cannot reach it) is planned
+  by GRP among the free robots the plan has nothing left for;
 * a robot whose next task is not ready waits for it (the plan's voluntary waiting);
   should nothing run and the plan start nothing (the plan's orders cannot go on in this
   state), GRP decides the step over every free robot and ready task, and the tasks it
@@ -52,22 +52,20 @@ class PlanFollower:
         self.by_plan = self.by_grp = 0  # tasks started as planned; by GRP (new or broken)
 
     def reset(self, instance: Instance) -> None:
-        """Map the plan onto ``instance`` by ids: tasks whose subteam is whole and still
-        covers the task keep it; the others are left to GRP."""
+        """Map the plan onto ``instance`` by ids: tasks whose subteam is whole keep it (that
+        it still covers the task is checked when it is due); the others are left to GRP."""
         self.instance = instance
         self.grp.reset(instance)
         self.team, self.start, self.by_plan, self.by_grp = {}, {}, 0, 0
         order: list[tuple[float, int]] = []
+        tasks, robots = instance.task_index, instance.robot_index
         for a in self.plan.assignments:
-            j = instance.task_index.get(a.task)
-            team = [instance.robot_index.get(r) for r in a.robots]
+            j = tasks.get(a.task)
+            team = [robots.get(r) for r in a.robots]
             if j is None or not team or None in team:
                 continue
-            idx = tuple(sorted(r for r in team if r is not None))
-            if covers(instance.robot_amounts[list(idx)], instance.robot_payload[list(idx)], instance.task_needs[j],
-                      instance.tasks[j].payload, bool(instance.task_roles[j])):
-                self.team[j], self.start[j] = idx, a.start
-                order.append((a.start, j))
+            self.team[j], self.start[j] = tuple(sorted(r for r in team if r is not None)), a.start
+            order.append((a.start, j))
         order.sort()
         self.queue = [deque() for _ in instance.robots]
         for _, j in order:
@@ -85,18 +83,24 @@ class PlanFollower:
         inst = state.instance
         if self.instance is not inst:
             self.reset(inst)
-        for r, q in enumerate(self.queue):  # tasks started (as planned or not) since: out of the orders
+        free = set(state.free_robots())
+        for r in free:  # tasks started (as planned or not) since: out of the orders (a busy robot's when it is free)
+            q = self.queue[r]
             while q and state.task_status[q[0]] >= TaskStatus.ASSIGNED:
                 self._drop(q[0])
             if q and math.isinf(state.arrival(q[0], [r])):  # a subteam that can no longer get there
                 self._drop(q[0])
-        free = set(state.free_robots())
         ready = state.ready_tasks()
         out: list[tuple[int, tuple[int, ...]]] = []
         planned = sorted((j for j in ready if j in self.team), key=lambda j: (self.start[j], j))
         for j in planned:
             team = self.team[j]
             if all(r in free and self.queue[r][0] == j for r in team):
+                idx = list(team)
+                if not covers(inst.robot_amounts[idx], inst.robot_payload[idx], inst.task_needs[j],
+                              inst.tasks[j].payload, bool(inst.task_roles[j])):
+                    self._drop(j)  # the task changed since the plan: GRP's, below
+                    continue
                 out.append((j, team))
                 free -= set(team)
         unplanned = [j for j in ready if j not in self.team]

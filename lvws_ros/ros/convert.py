@@ -85,16 +85,29 @@ def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
     return msg
 
 
+_ASSIGNED, _DONE = int(TaskStatus.ASSIGNED), int(TaskStatus.DONE)  # ints: compared for every task of every graph
+
+
+def _numbers(values: Any, kind: type) -> tuple[Any, ...]:
+    """A sequence field as a tuple of plain ints or floats (rclpy gives array.array, a bag
+    reader numpy arrays: both have tolist, which is what makes this quick)."""
+    out = values.tolist() if hasattr(values, "tolist") else values
+    return tuple(out) if all(type(v) is kind for v in out) else tuple(kind(v) for v in out)
+
+
 def graph_from_msg(msg: Any) -> GraphSnapshot:
     tasks = []
+    newer = bool(msg.tasks) and hasattr(msg.tasks[0], "requires")  # bags of the first format lack the travel/trait fields
     for t in msg.tasks:
         status = int(t.status)
-        start = from_time(t.start_time) if status >= TaskStatus.ASSIGNED else None
-        end = from_time(t.end_time) if status == TaskStatus.DONE else None
-        tasks.append(TaskInfo(t.id, status, tuple(int(c) for c in t.capabilities), float(t.payload),
+        start = from_time(t.start_time) if status >= _ASSIGNED else None
+        end = from_time(t.end_time) if status == _DONE else None
+        tasks.append(TaskInfo(t.id, status, _numbers(t.capabilities, int), float(t.payload),
                               float(t.duration), tuple(t.prerequisites), tuple(t.assigned_robots), start, end,
-                              str(getattr(t, "site_from", "")), str(getattr(t, "site_to", "")),
-                              tuple(float(a) for a in getattr(t, "requires", ())), int(getattr(t, "roles", 0))))
+                              *((str(t.site_from), str(t.site_to), _numbers(t.requires, float), int(t.roles)) if newer
+                                else (str(getattr(t, "site_from", "")), str(getattr(t, "site_to", "")),
+                                      tuple(float(a) for a in getattr(t, "requires", ())),
+                                      int(getattr(t, "roles", 0))))))
     sites = tuple((str(s.id), float(s.x), float(s.y)) for s in getattr(msg, "sites", ()))
     return GraphSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names), tuple(tasks), sites,
                          tuple(float(d) for d in getattr(msg, "site_distances", ())),
