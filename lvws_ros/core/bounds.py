@@ -10,9 +10,11 @@ size (the exact solver proves optima only on small cells):
   a robot does first); the longest such chain, each task's duration and the longest
   duration path after it added;
 * **workload over capacity**: the robot-seconds every task needs (at least as many robots
-  as carry its payload, at least one) over the team's size; for each capability, the
-  seconds of the tasks needing it over its holders; the payload-seconds over the team's
-  payload.
+  as carry its payload and as add up to each trait it needs, :func:`fewest_members`) over
+  the team's size; for each capability (trait), the seconds (trait-seconds) of the tasks
+  needing it over its holders (what the team has of it); with travel, the same per site for
+  a trait only fixed robots have, over the fixed robots at that site; the payload-seconds
+  over the team's payload.
 
 Both are O(N M K + M log M + S^3) (S: sites). With travel, times are from time 0 and
 robots at their start sites; the executor's model (travel, then the task) is what they
@@ -24,11 +26,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.subteams import TOLERANCE, FloatArray, earliest_cover, fewest_carriers
 
-__all__ = ["Bounds", "gap", "lower_bounds"]
+__all__ = ["Bounds", "fewest_members", "gap", "lower_bounds"]
 
 
 @dataclass(frozen=True)
@@ -89,13 +92,54 @@ def _critical_path(inst: Instance) -> float:
     return float((head + inst.critical_tail).max())
 
 
+def fewest_members(inst: Instance) -> npt.NDArray[np.int64]:
+    """(M,) the fewest robots a covering subteam of each task can have: enough of the
+    heaviest to carry its payload, and for each trait enough of its largest holders to add
+    up to the need (with roles each member fills one slot: the counts of the traits add
+    up; without, the largest count); at least one, at most the team."""
+    n = inst.num_robots
+    amounts = np.asarray(inst.robot_amounts, dtype=np.float64)
+    need = np.asarray(inst.task_needs, dtype=np.float64)
+    per_trait = np.zeros(need.shape, dtype=np.int64)
+    for k in range(need.shape[1]):
+        wanted = need[:, k] > TOLERANCE
+        if wanted.any():
+            ordered = np.sort(amounts[:, k])[::-1].cumsum()
+            per_trait[wanted, k] = np.searchsorted(ordered, need[wanted, k] - TOLERANCE) + 1
+    roles = np.asarray(inst.task_roles, dtype=bool)
+    traits = np.where(roles, per_trait.sum(axis=1), per_trait.max(axis=1, initial=0))
+    carriers = fewest_carriers(inst.robot_payload, inst.task_payload)
+    return np.asarray(np.clip(np.maximum(traits, carriers), 1, max(n, 1)), dtype=np.int64)
+
+
+def _site_workload(inst: Instance) -> float:
+    """With travel: for each site and each trait that no mobile robot has, the tasks
+    meeting there that need it can only be served by the fixed robots at that site: their
+    trait-seconds over what those robots have of it."""
+    tr = inst.travel
+    if tr is None or inst.num_tasks == 0:
+        return 0.0
+    speed = np.asarray(tr.robot_speed, dtype=np.float64)
+    site = np.asarray(tr.robot_site, dtype=np.int64)
+    amounts = np.asarray(inst.robot_amounts, dtype=np.float64)
+    need = np.asarray(inst.task_needs, dtype=np.float64)
+    meet = np.asarray(tr.task_from, dtype=np.int64)
+    mobile = (amounts[speed > 0] > 0).any(axis=0)  # (K,) some robot that moves has it
+    best = 0.0
+    for s in np.unique(site[speed <= 0]):
+        have = amounts[(speed <= 0) & (site == s)].sum(axis=0)
+        here = meet == s
+        for k in np.flatnonzero(~mobile & (have > 0)):
+            best = max(best, float((inst.durations[here] * need[here, k]).sum()) / float(have[k]))
+    return best
+
+
 def _workload(inst: Instance) -> float:
     n, m = inst.num_robots, inst.num_tasks
     if m == 0 or n == 0:
         return 0.0
     durations = inst.durations
-    fewest = np.minimum(fewest_carriers(inst.robot_payload, inst.task_payload), n)  # robots for the payload
-    ratios = [float((durations * np.maximum(fewest, 1)).sum()) / n]
+    ratios = [float((durations * fewest_members(inst)).sum()) / n, _site_workload(inst)]  # robot-seconds
     holders = inst.robot_amounts.sum(axis=0)  # per capability (trait): how much of it the team has
     for k in range(inst.task_needs.shape[1]):
         need = inst.task_needs[:, k] > 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from conftest import REPO
@@ -114,3 +115,38 @@ def test_cp_sats_bound_with_travel_is_not_taken_as_the_instances(tmp_path, capsy
     assert main(["solve", str(path), "--policy", "exact", "--workers", "1", "--out", str(out)]) == 0
     assert json.loads(out.read_text())["bound"] <= 12.0 + 1e-9
     assert "warning" not in capsys.readouterr().err
+
+
+def test_the_fewest_members_bound_every_covering_subteam_and_the_bound_stays_below_the_optimum():
+    from lvws_ros.core.bounds import fewest_members
+    from lvws_ros.core.families import family_test_split
+    from lvws_ros.core.subteams import lightest_cover, random_cover
+
+    rng = np.random.default_rng(0)
+    for inst in family_test_split("traits-roles", 0, 12) + family_test_split("traits", 0, 6):
+        fewest = fewest_members(inst)
+        traits_from = len(inst.capabilities) if inst.traits else None
+        for j, t in enumerate(inst.tasks):
+            roles = bool(inst.task_roles[j])
+            args = (inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload)
+            for team in (lightest_cover(*args, roles=roles, traits_from=traits_from),
+                         random_cover(*args, rng, roles=roles)):
+                assert team is not None and len(team) >= fewest[j], (inst.name, t.id)
+        res = solve_exact(inst, workers=8, time_limit=10)
+        if res.proven:
+            assert lower_bounds(inst).best <= res.makespan + 1e-9, inst.name
+
+
+def test_a_trait_only_fixed_robots_have_bounds_the_work_at_their_site():
+    # two welding tasks at site a, one fixed welder there: they run one after the other
+    data = {"format": "lvws-instance/1", "name": "site", "traits": ["weld", "lift"],
+            "sites": {"a": [0, 0], "b": [5, 0]},
+            "robots": [{"id": "w", "traits": {"weld": 1}, "site": "a"},
+                       {"id": "m0", "traits": {"lift": 1}, "site": "b", "speed": 1.0},
+                       {"id": "m1", "traits": {"lift": 1}, "site": "b", "speed": 1.0}],
+            "tasks": [{"id": "t0", "requires": {"weld": 1}, "duration": 4, "after": [], "site": "a"},
+                      {"id": "t1", "requires": {"weld": 1}, "duration": 3, "after": [], "site": "a"},
+                      {"id": "t2", "requires": {"lift": 1}, "duration": 1, "after": [], "site": "b"}]}
+    inst = instance_from_dict(data)
+    assert lower_bounds(inst).workload == pytest.approx(7.0)
+    assert simulate(inst, GreedyPayloadPolicy()).schedule.makespan == pytest.approx(7.0)
