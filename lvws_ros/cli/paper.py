@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import platform
+import re
 import statistics
 import time
 from collections.abc import Callable, Sequence
@@ -479,8 +480,6 @@ def read_optima(path: Path) -> dict[str, tuple[int, int]]:
 def _psplib_set(name: str) -> str:
     """J30, J60, J90 or J120 for PSPLIB's names (``j301_1``: J30, parameter set 1,
     instance 1), Patterson for ``pat*``."""
-    import re
-
     m = re.fullmatch(r"j(120|30|60|90)\d+_\d+", name)
     return f"J{m.group(1)}" if m else ("Patterson" if name.startswith("pat") else "other")
 
@@ -497,8 +496,12 @@ def psplib_rows(folder: Path, time_limit: float, workers: int, progress: bool) -
     from lvws_ros.policies.exact import solve_exact
 
     optima = read_optima(folder / "optima.csv")
-    files = sorted((p for p in folder.iterdir() if p.suffix in (".sm", ".rcp")),
-                   key=lambda p: (p.stem.rstrip("0123456789_"), len(p.stem), p.stem))
+    def order(p: Path) -> tuple[int, list[int], str]:  # J30 before J60 ..., j301_2 before j301_10
+        label = _psplib_set(p.stem)
+        rank = PSPLIB_SETS.index(label) if label in PSPLIB_SETS else len(PSPLIB_SETS)
+        return rank, [int(n) for n in re.findall(r"\d+", p.stem)], p.stem
+
+    files = sorted((p for p in folder.iterdir() if p.suffix in (".sm", ".rcp")), key=order)
     rows = []
     for path in tqdm(files, desc="psplib", disable=not progress, unit="inst"):
         inst = import_psplib(path)

@@ -24,6 +24,13 @@ does, whose arcs carry the travel; with the objective "return", the way home. On
 window's worth of later tasks is in the model then (the circuits grow with the square of
 a robot's tasks in the model), and the window holds DEFAULT_WINDOW_TRAVEL tasks by default.
 
+When some robots are interchangeable (:mod:`~lvws_ros.core.pools`) and there is no
+travel, the windows are over pools: the window's tasks choose a count per pool (the exact
+expert's pool model) and their starts, the later tasks keep their counts per pool (not
+their robots) and move, and per pool one cumulative holds the counts, each robot taking a
+unit until the prefix leaves it free; the robots are given afterwards, exactly. Without a
+model per robot a window holds far more tasks (DEFAULT_WINDOW_POOLS).
+
 The objective is the makespan, then the sum of the tasks' ends (so that a window off the
 critical path can still make room). CP-SAT is hinted with the incumbent. The solution's
 subteams and per-robot orders are left-shifted in real time
@@ -38,11 +45,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from ortools.sat.python import cp_model
 
 from lvws_ros.core.executor import State, TaskStatus
+from lvws_ros.core.pools import Pool, assign_units, pools, trivial
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.core.subteams import TOLERANCE, covers, prune
@@ -52,19 +61,22 @@ from lvws_ros.policies.exact import (
     _hint_travel,
     _Horizon,
     _payload_units,
+    _pool_cover,
     _time_scale,
     _travel_times,
+    _upper,
     covering_members,
     left_shift,
 )
 
 DEFAULT_WINDOW = 12  # tasks re-planned per neighbourhood
 DEFAULT_WINDOW_TRAVEL = 6  # the same with travel (chosen on the training family traits-return, 30 x 100)
+DEFAULT_WINDOW_POOLS = 48  # the same over pools (chosen on PSPLIB j1202_1, j1203_1, j1204_1 from GRP, 10 s)
 ROUND_LIMIT = 0.5  # seconds CP-SAT may take for one neighbourhood
 LATER = 2  # tasks after the window in the model (shifted, not re-planned), in windows
 LATER_TRAVEL = 1  # the same with travel
 
-__all__ = ["DEFAULT_WINDOW", "DEFAULT_WINDOW_TRAVEL", "LNSResult", "improve"]
+__all__ = ["DEFAULT_WINDOW", "DEFAULT_WINDOW_POOLS", "DEFAULT_WINDOW_TRAVEL", "LNSResult", "improve"]
 
 
 @dataclass
@@ -87,6 +99,31 @@ def _better(a: tuple[float, float], b: tuple[float, float]) -> bool:
     return abs(a[0] - b[0]) <= TOLERANCE and a[1] < b[1] - TOLERANCE * max(1.0, abs(b[1]))
 
 
+def _prefix(inst: Instance, state: State, inc: Schedule, prefix: list[int], free: list[int],
+            scale: int) -> tuple[dict[int, int], dict[int, int], dict[int, list[int]], np.ndarray,
+                                 np.ndarray | None, np.ndarray, int, int]:
+    """What the fixed prefix leaves: the free tasks' durations in ticks, the prefix's ends
+    in ticks (rounded up: nothing starts before a real end), the incumbent's subteams, when
+    each robot's last task ends (seconds; the way home) and where it is then, when it is
+    free for the window in ticks (rounded up too), now and a horizon in ticks."""
+    by_task = inc.by_task()
+    dur = {j: max(1, round(float(inst.durations[j]) * scale)) for j in free}
+    fixed_end = {j: math.ceil(by_task[inst.tasks[j].id].end * scale - 1e-9) for j in prefix}
+    incumbent_team = {j: [inst.robot_index[name] for name in by_task[inst.tasks[j].id].robots]
+                      for j in [*prefix, *free]}
+    free_from = state.robot_free_at.astype(float)
+    site = None if state.robot_site is None else state.robot_site.copy()
+    for j in sorted(prefix, key=lambda k: (by_task[inst.tasks[k].id].end, k)):
+        for k in incumbent_team[j]:
+            free_from[k] = max(free_from[k], by_task[inst.tasks[j].id].end)
+            if site is not None and inst.travel is not None and state.task_status[j] < TaskStatus.ASSIGNED:
+                site[k] = inst.travel.task_to[j]
+    release = np.ceil(np.maximum(free_from, state.time) * scale - 1e-9).astype(np.int64)
+    t0 = math.ceil(state.time * scale - 1e-9)
+    upper = int(sum(dur.values()) + max([t0, *release.tolist(), *fixed_end.values()]))
+    return dur, fixed_end, incumbent_team, free_from, site, release, t0, upper
+
+
 def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int], window: list[int],
                   later: list[int], scale: int, solve_by: float, workers: int,
                   seed: int, work: float | None = None) -> tuple[Schedule | None, bool]:
@@ -97,23 +134,9 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     whether the solver ran at all (False: the model's building took the round's time).
     ``work``: CP-SAT's deterministic time limit instead (the same result every run)."""
     by_task = inc.by_task()
-    dur = {j: max(1, round(float(inst.durations[j]) * scale)) for j in window + later}
+    dur, fixed_end, incumbent_team, free_from, site, release, t0, upper = _prefix(inst, state, inc, prefix,
+                                                                                  window + later, scale)
     free = set(window) | set(later)
-    # Ends of the fixed prefix, in ticks (rounded up: nothing starts before a real end).
-    fixed_end = {j: math.ceil(by_task[inst.tasks[j].id].end * scale - 1e-9) for j in prefix}
-    incumbent_team = {j: [inst.robot_index[name] for name in by_task[inst.tasks[j].id].robots]
-                      for j in [*prefix, *free]}
-    free_from = state.robot_free_at.astype(float)  # when each robot's last task ends (seconds; the way home)
-    site = None if state.robot_site is None else state.robot_site.copy()  # where each robot is after the prefix
-    for j in sorted(prefix, key=lambda k: (by_task[inst.tasks[k].id].end, k)):
-        for k in incumbent_team[j]:
-            free_from[k] = max(free_from[k], by_task[inst.tasks[j].id].end)
-            if site is not None and inst.travel is not None and state.task_status[j] < TaskStatus.ASSIGNED:
-                site[k] = inst.travel.task_to[j]
-    # When each robot is free for the window, in ticks (rounded up, as the prefix's ends).
-    release = np.ceil(np.maximum(free_from, state.time) * scale - 1e-9).astype(np.int64)
-    t0 = math.ceil(state.time * scale - 1e-9)
-    upper = int(sum(dur.values()) + max([t0, *release.tolist(), *fixed_end.values()]))
     if inst.travel is not None:  # the incumbent fits: its moves rounded up add under a tick each
         upper = max(upper, math.ceil(inc.makespan * scale) + len(free) + 2)
     model = cp_model.CpModel()
@@ -161,26 +184,13 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     model.add_hint(makespan, upper)
     for j in free:  # the incumbent, on the tick scale, as the hint
         model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
-    solver = cp_model.CpSolver()
-    time_limit = solve_by - time.perf_counter()  # the model's building counts against the round's time
-    if work is not None:
-        solver.parameters.max_deterministic_time = work
-    elif time_limit <= 0.01:
+    solver = _solver(solve_by, work, workers, seed)
+    if solver is None:
         return None, False
-    else:
-        solver.parameters.max_time_in_seconds = time_limit
-    solver.parameters.num_workers = workers
-    solver.parameters.random_seed = seed
-    solver.parameters.cp_model_probing_level = 0  # a neighbourhood's time goes to search, not to probing
     status = solver.solve(model)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         return None, True
-    # The left shift keeps each robot's order by start: the tasks after the model go after
-    # every task in it, in their own order (a common offset), as they did in the incumbent.
-    fixed = set(prefix)
-    offset = max([0.0, *(solver.value(start[j]) / scale + float(inst.durations[j]) for j in free)])
-    out = [a if inst.task_index[a.task] in fixed else Assignment(a.task, a.robots, a.start + offset, a.end + offset)
-           for a in inc.assignments if inst.task_index[a.task] not in free]
+    out = _outside(inst, inc, prefix, free, {j: solver.value(start[j]) / scale for j in free})
     for j in free:
         t = inst.tasks[j]
         if j in member:
@@ -198,6 +208,97 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), True
 
 
+def _solver(solve_by: float, work: float | None, workers: int, seed: int) -> cp_model.CpSolver | None:
+    """CP-SAT for one neighbourhood, until ``solve_by`` (the model's building counts
+    against the round's time) or for ``work`` deterministic time; None: no time left."""
+    solver = cp_model.CpSolver()
+    time_limit = solve_by - time.perf_counter()
+    if work is not None:
+        solver.parameters.max_deterministic_time = work
+    elif time_limit <= 0.01:
+        return None
+    else:
+        solver.parameters.max_time_in_seconds = time_limit
+    solver.parameters.num_workers = workers
+    solver.parameters.random_seed = seed
+    solver.parameters.cp_model_probing_level = 0  # a neighbourhood's time goes to search, not to probing
+    return solver
+
+
+def _outside(inst: Instance, inc: Schedule, prefix: list[int], free: set[int],
+             starts: dict[int, float]) -> list[Assignment]:
+    """The incumbent's tasks outside the model: the prefix as it is, and the tasks after
+    the model after every task in it (a common offset), in their own order: the left shift
+    keeps each robot's order by start, as they had it in the incumbent."""
+    fixed = set(prefix)
+    offset = max([0.0, *(starts[j] + float(inst.durations[j]) for j in free)])
+    return [a if inst.task_index[a.task] in fixed else Assignment(a.task, a.robots, a.start + offset, a.end + offset)
+            for a in inc.assignments if inst.task_index[a.task] not in free]
+
+
+def _pool_window_model(inst: Instance, state: State, inc: Schedule, found: tuple[Pool, ...], prefix: list[int],
+                       window: list[int], later: list[int], scale: int, solve_by: float, workers: int,
+                       seed: int, work: float | None = None) -> tuple[Schedule | None, bool]:
+    """One neighbourhood over pools of interchangeable robots (no travel): the window's
+    tasks choose a count per pool (the exact expert's pool model) and their starts; the
+    later tasks keep their counts per pool and move; per pool one cumulative, each robot
+    holding a unit until the prefix leaves it free. The robots of each pool are given
+    afterwards (:func:`~lvws_ros.core.pools.assign_units`), then left-shifted."""
+    by_task = inc.by_task()
+    dur, fixed_end, team0, _, _, release, t0, upper = _prefix(inst, state, inc, prefix, window + later, scale)
+    free = set(window) | set(later)
+    of = {r: p for p, pool in enumerate(found) for r in pool.robots}
+    model = cp_model.CpModel()
+    start = {j: model.new_int_var(t0, upper, f"S_{j}") for j in free}
+    end = {j: start[j] + dur[j] for j in free}
+    makespan = model.new_int_var(max([t0, *fixed_end.values()]), upper, "C")
+    pay_int, need_int = _payload_units(inst)
+    count: dict[int, dict[int, Any]] = {}
+    for j in window:
+        count[j] = _pool_cover(model, inst, j, found, pay_int, need_int)
+        for p, n in count[j].items():
+            model.add_hint(n, min(sum(of[r] == p for r in team0[j]), _upper(n)))
+    for j in later:  # their counts fixed
+        count[j] = {p: sum(of[r] == p for r in team0[j]) for p in {of[r] for r in team0[j]}}
+    for p, pool in enumerate(found):
+        ivs = [model.new_fixed_size_interval_var(start[j], dur[j], f"I_{p}_{j}") for j in free if p in count[j]]
+        demands = [count[j][p] for j in free if p in count[j]]
+        for r in pool.robots:
+            if release[r] > t0:
+                ivs.append(model.new_fixed_size_interval_var(t0, int(release[r]) - t0, f"busy_{r}"))
+                demands.append(1)
+        if ivs:
+            model.add_cumulative(ivs, demands, pool.size)
+    for j in free:
+        for q in inst.prerequisites[j]:
+            model.add(start[j] >= (end[q] if q in free else fixed_end[q]))
+        model.add(makespan >= end[j])
+        model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
+    model.minimize((len(free) * (upper + 1) + 1) * makespan + sum(end.values()))  # the makespan, then the ends
+    solver = _solver(solve_by, work, workers, seed)
+    if solver is None:
+        return None, False
+    if solver.solve(model) not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        return None, True
+    teams: dict[int, list[int]] = {j: [] for j in free}
+    for p, pool in enumerate(found):
+        tasks = [j for j in free if int(solver.value(count[j][p]) if p in count[j] else 0) > 0]
+        uses = [(float(solver.value(start[j])), float(solver.value(start[j]) + dur[j]), int(solver.value(count[j][p])))
+                for j in tasks]
+        for j, robots in zip(tasks, assign_units(pool.robots, [float(release[r]) for r in pool.robots], uses, 0.0),
+                             strict=True):
+            teams[j] += robots
+    out = _outside(inst, inc, prefix, free, {j: solver.value(start[j]) / scale for j in free})
+    for j in free:
+        t, roles = inst.tasks[j], bool(inst.task_roles[j])
+        if not covers(inst.robot_amounts[teams[j]], inst.robot_payload[teams[j]], inst.task_needs[j], t.payload, roles):
+            raise ExpertError(f"task {t.id!r}: the pool window's subteam does not cover it (payload rounding)")
+        team = prune(teams[j], inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload, roles=roles)
+        s0 = solver.value(start[j]) / scale
+        out.append(Assignment(t.id, tuple(inst.robots[r].id for r in sorted(team)), s0, s0 + t.duration))
+    return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), True
+
+
 def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,
             window: int | None = None, workers: int = 1, seed: int = 0,
             round_limit: float = ROUND_LIMIT, bound: float | None = None,
@@ -207,15 +308,17 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     returns a schedule longer than the incumbent; the same seed gives the same windows.
     With a lower ``bound`` (:func:`~lvws_ros.core.bounds.lower_bounds`), it stops when the
     schedule reaches it (optimal). ``window``: tasks per neighbourhood (None: DEFAULT_WINDOW,
-    DEFAULT_WINDOW_TRAVEL with travel). ``max_rounds``: at most this many neighbourhoods,
+    DEFAULT_WINDOW_TRAVEL with travel, DEFAULT_WINDOW_POOLS over pools). ``max_rounds``: at most this many neighbourhoods,
     each solved within ``round_limit`` of CP-SAT's deterministic time (not wall time) on
     ``workers`` = 1: the same result on every run and machine (``time_limit`` still holds)."""
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state
     best = left_shift(inst, incumbent, state)
     first = float(best.makespan)
+    found = pools(inst, state) if inst.travel is None else ()
+    pooled = bool(found) and not trivial(found)  # interchangeable robots: windows over pools
     if window is None:
-        window = DEFAULT_WINDOW if inst.travel is None else DEFAULT_WINDOW_TRAVEL
+        window = DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if inst.travel is None else DEFAULT_WINDOW_TRAVEL
     if window < 1:
         raise ExpertError(f"lns: the window must hold at least one task, got {window}")
     scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
@@ -252,8 +355,12 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         work = None if max_rounds is None else round_limit
         if work is not None:
             solve_by = deadline
-        cand, solved = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers,
-                                     seed + rounds, work)
+        if pooled:
+            cand, solved = _pool_window_model(inst, state, best, found, prefix, picked, later, scale, solve_by,
+                                              workers, seed + rounds, work)
+        else:
+            cand, solved = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers,
+                                         seed + rounds, work)
         rounds += solved
 
         if cand is not None and _better(_score(cand), _score(best)):

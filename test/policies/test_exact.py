@@ -7,6 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
+from twins import twin_instances, with_twins
 
 from lvws_ros.core.datasets import DATASETS, dataset_instance, random_instance
 from lvws_ros.core.executor import TaskStatus, simulate
@@ -132,57 +133,11 @@ def test_the_exact_policy_replans_when_the_world_misses_a_planned_departure():
 
 # ---------------------------------------------------------------- the pool model
 
-def _with_twins(inst, copies):
-    """``inst`` with ``copies[i]`` extra copies of robot i (the same for the plan)."""
-    from dataclasses import replace
-
-    robots = list(inst.robots)
-    for i, k in enumerate(copies):
-        robots += [replace(inst.robots[i], id=f"{inst.robots[i].id}_twin{c}") for c in range(k)]
-    return replace(inst, robots=tuple(robots))
-
-
-def _twin_instances(count, roles=False, objective="makespan"):
-    """Small trait instances with interchangeable robots (two to three kinds, two to three
-    of each), tasks needing one to three units."""
-    from lvws_ros.core.problem import Instance, Robot, Task
-
-    out = []
-    for seed in range(count):
-        rng = np.random.default_rng(7000 + seed)
-        kinds = [tuple((t, float(rng.integers(1, 3))) for t in ("weld", "lift", "scan") if rng.random() < 0.6)
-                 or (("weld", 1.0),) for _ in range(int(rng.integers(2, 4)))]
-        robots = tuple(Robot(f"k{k}_{u}", (), 0.0, traits=traits) for k, traits in enumerate(kinds)
-                       for u in range(int(rng.integers(2, 4))))
-        tasks = []
-        for j in range(int(rng.integers(4, 7))):
-            need = tuple((t, float(rng.integers(1, 3))) for t in ("weld", "lift", "scan") if rng.random() < 0.5) \
-                or (("weld", 1.0),)
-            after = tuple(f"t{p}" for p in range(j) if rng.random() < 0.25)
-            tasks.append(Task(f"t{j}", (), 0.0, float(rng.integers(1, 6)), after, requires=need))
-        team = {t: sum(a for r in robots for n, a in r.traits if n == t) for t in ("weld", "lift", "scan")}
-        tasks = [t for t in tasks if all(team[n] >= a for n, a in t.requires)]
-        keep = {t.id for t in tasks}
-        tasks = [replace_after(t, keep) for t in tasks]
-        try:
-            out.append(Instance(f"twins{seed}", (), robots, tuple(tasks), traits=("weld", "lift", "scan"),
-                                roles=roles, objective=objective))
-        except Exception:  # a task no team covers with roles: leave it out
-            continue
-    return out
-
-
-def replace_after(task, keep):
-    from dataclasses import replace
-
-    return replace(task, after=tuple(p for p in task.after if p in keep))
-
-
 @pytest.mark.parametrize("roles,objective", [(False, "makespan"), (True, "makespan"), (False, "return")])
 def test_the_pool_model_proves_the_per_robot_optimum(roles, objective):
     from lvws_ros.core.pools import pools, trivial
 
-    cases = _twin_instances(8, roles=roles, objective=objective)
+    cases = twin_instances(8, roles=roles, objective=objective)
     assert len(cases) >= 5
     for inst in cases:
         assert not trivial(pools(inst))
@@ -196,7 +151,7 @@ def test_the_pool_model_proves_the_per_robot_optimum(roles, objective):
 
 @pytest.mark.parametrize("index", [800, 801])
 def test_the_pool_model_on_the_paper_recipe_with_twins_and_from_a_mid_run_state(index):
-    inst = _with_twins(dataset_instance(DATASETS["I"], index, seed=0), [1, 0, 2])
+    inst = with_twins(dataset_instance(DATASETS["I"], index, seed=0), [1, 0, 2])
     per_robot = solve_exact(inst, workers=2, time_limit=60, formulation="coalition")
     pooled = solve_exact(inst, workers=2, time_limit=60)
     assert pooled.model == "pool" and pooled.proven and per_robot.proven
@@ -218,7 +173,7 @@ def test_the_pool_model_brute_force_on_tiny_twins():
     for seed in range(6):
         rng = np.random.default_rng(3000 + seed)
         base = random_instance(rng, 2, int(rng.integers(2, 5)), f"tiny{seed}")
-        inst = _with_twins(base, [1, int(rng.integers(0, 2))])
+        inst = with_twins(base, [1, int(rng.integers(0, 2))])
         res = solve_exact(inst, workers=2)
         assert res.model == "pool" and res.proven
         assert res.makespan == pytest.approx(brute_force_makespan(inst))
@@ -230,7 +185,7 @@ def test_pool_schedules_pass_lvws_check(tmp_path):
 
     from lvws_ros.core.formats import save_instance, save_schedule
 
-    inst = _twin_instances(3, roles=True)[0]
+    inst = twin_instances(3, roles=True)[0]
     res = solve_exact(inst, workers=2)
     save_instance(inst, tmp_path / "i.json")
     save_schedule(res.schedule, tmp_path / "s.json")
