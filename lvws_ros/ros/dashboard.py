@@ -10,7 +10,14 @@ from the ``plotly`` wheel), updated over a websocket twice a second:
 * each robot's state (a table) and the cell picture: sites and robots at their poses;
 * diagnostics and the decision latency per step;
 * live: buttons for the simulator's services (submit tasks from a YAML file, cancel a
-  task, fail or repair a robot), with the service's answer shown.
+  task, fail or repair a robot), with the service's answer shown (none with ``--read-only``).
+
+Access: the views (``/view``, the websocket) and every control action (``POST /world``)
+need the dashboard's token, generated at start (:func:`~lvws_ros.ros.launcher.new_token`) and printed in the page's
+URL (``?token=``) as Jupyter does, or given (``--token``, or the ``LVWS_DASHBOARD_TOKEN``
+environment variable; a given token is never printed). The page passes the token of its
+URL on; a request without it, with another, or from another page's origin gets 403 and
+changes nothing. Tokens are compared in constant time (:func:`hmac.compare_digest`).
 
 :class:`CellView` turns what the cell published (team and graph snapshots, decisions,
 diagnostics) into the page's JSON; it is the same for a live cell (:class:`LiveFeed`, an
@@ -22,8 +29,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import hmac
 import json
 import math
+import os
 import sys
 import tempfile
 import threading
@@ -35,11 +44,18 @@ from typing import Any
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, TeamSnapshot
 from lvws_ros.errors import LvwsError
+from lvws_ros.ros.launcher import DASHBOARD_TOKEN_ENV as TOKEN_ENV
+from lvws_ros.ros.launcher import new_token
 
 DEFAULT_PORT = 8080
 PUSH_SECONDS = 0.5  # the page is sent a new view this often
 KEPT_DIAGNOSTICS = 200  # the latest statuses shown (and kept, live)
 KEPT_DECISIONS = 20_000  # live: the latest decisions kept (the Gantt's assigned bars)
+TOKEN_HEADER = "x-lvws-token"  # how a control action carries the token (the websocket: ?token=)
+# The cell picture's labels are placed in data units for a plot of at least this many pixels
+# (the page's cell panel is larger on any window the page fits), in the page's font.
+CELL_PLOT_PX = (520.0, 240.0)
+LABEL_CHAR_PX, LABEL_LINE_PX = 7.5, 16.0
 
 __all__ = ["DEFAULT_PORT", "CellView", "LiveFeed", "main", "make_app"]
 
@@ -223,7 +239,38 @@ def _cell(team: TeamSnapshot | None, graph: GraphSnapshot | None) -> dict[str, A
     sites = [] if graph is None else [{"name": n, "x": x, "y": y} for n, x, y in graph.sites]
     robots = [] if team is None else [{"id": r.id, "x": r.pose[0], "y": r.pose[1], "busy": not r.available}
                                       for r in team.robots]
-    return {"sites": sites, "robots": robots}
+    marks = ([(n, x, y, "site") for n, x, y in graph.sites] if graph is not None else []) + \
+        ([(r.id, r.pose[0], r.pose[1], "robot") for r in team.robots] if team is not None else [])
+    labels, box = _labels(marks)
+    return {"sites": sites, "robots": robots, "labels": labels, "range": box}
+
+
+def _labels(marks: list[tuple[str, float, float, str]]) -> tuple[list[dict[str, Any]], dict[str, list[float]] | None]:
+    """A label per (text, x, y, kind), placed by the GIF's rule
+    (:func:`~lvws_ros.sim.labels.place_labels`: right of its anchor, moved down until it
+    overlaps no other), so that robots sharing a site keep readable labels; and the axes'
+    ranges, at most ``unit`` data units per pixel on a plot of ``CELL_PLOT_PX``, the scale
+    the labels' sizes were reckoned in (a larger plot only adds room between them)."""
+    from lvws_ros.sim.labels import place_labels
+
+    if not marks:
+        return [], None
+    xs, ys = [m[1] for m in marks], [m[2] for m in marks]
+    unit = max((max(xs) - min(xs) + 4) / CELL_PLOT_PX[0], (max(ys) - min(ys) + 4) / CELL_PLOT_PX[1])  # data per px
+    for _ in range(8):  # the ranges grow with the labels, the labels with the scale: to a fixed point
+        height = LABEL_LINE_PX * unit
+        widths = [(len(m[0]) * LABEL_CHAR_PX + 6) * unit for m in marks]
+        corners = place_labels([(m[1], m[2]) for m in marks], widths, height, dx=8 * unit, dy=height / 2)
+        box = {"x": [min(xs) - 24 * unit, max(max(xs), *(c[0] + w for c, w in zip(corners, widths, strict=True)))
+                     + 12 * unit],
+               "y": [min(min(ys), *(c[1] - height for c in corners)) - 12 * unit, max(ys) + 24 * unit]}
+        need = max((box["x"][1] - box["x"][0]) / CELL_PLOT_PX[0], (box["y"][1] - box["y"][0]) / CELL_PLOT_PX[1])
+        if need <= unit * (1 + 1e-9):
+            break
+        unit = need
+    labels = [{"text": text, "kind": kind, "x": left, "y": top, "width": w, "height": height, "anchor": [x, y]}
+              for (text, x, y, kind), (left, top), w in zip(marks, corners, widths, strict=True)]
+    return labels, box
 
 
 def _latency(diags: list[dict[str, str]]) -> list[dict[str, float]]:
@@ -322,17 +369,34 @@ class LiveFeed:
 PAGE = Path(__file__).with_name("dashboard.html")
 
 
-def make_app(view: CellView, feed: LiveFeed | None = None) -> Any:
+def check_token(token: str) -> str:
+    """``token`` when it can be a token (printable ASCII without spaces, 8 characters or
+    more); LvwsError otherwise (the token itself is not repeated)."""
+    if len(token) < 8 or not all(33 <= ord(c) < 127 for c in token):
+        raise LvwsError("--token: a token is 8 or more printable ASCII characters without spaces")
+    return token
+
+
+def _same_token(given: str | None, token: str) -> bool:
+    """Whether ``given`` is ``token``, compared in constant time."""
+    return given is not None and hmac.compare_digest(given.encode("utf-8", "replace"), token.encode())
+
+
+def make_app(view: CellView, feed: LiveFeed | None = None, *, token: str, read_only: bool = False) -> Any:
     """The Starlette app: the page, plotly.js, the view as JSON (``/view?t=``), a websocket
-    pushing it (``/ws``), and, live, ``POST /world`` for the simulator's services."""
+    pushing it (``/ws``), and, live, ``POST /world`` for the simulator's services. The
+    views and ``/world`` need ``token`` (a ``?token=`` parameter, or the ``X-LVWS-Token``
+    header) and this page's origin; else 403, and nothing is done. ``read_only``: no
+    ``/world`` (403) and the page shows no controls."""
     import plotly
     from starlette.applications import Starlette
-    from starlette.requests import Request
+    from starlette.requests import HTTPConnection, Request
     from starlette.responses import FileResponse, HTMLResponse, JSONResponse
     from starlette.routing import Route, WebSocketRoute
     from starlette.websockets import WebSocket, WebSocketDisconnect
 
     plotly_js = Path(plotly.__file__).parent / "package_data" / "plotly.min.js"
+    controls = feed is not None and not read_only
 
     async def page(_request: Request) -> HTMLResponse:
         return HTMLResponse(PAGE.read_text(encoding="utf-8"))
@@ -347,23 +411,33 @@ def make_app(view: CellView, feed: LiveFeed | None = None) -> Any:
             return None
         return t if t is None or math.isfinite(t) else None
 
-    async def view_json(request: Request) -> JSONResponse:
-        return JSONResponse(view.view(at(request.query_params.get("t"))))
+    def refused(conn: HTTPConnection) -> str | None:
+        """Why a request may not see or act on the cell (None: it may): another site's page,
+        or not this dashboard's token."""
+        origin = conn.headers.get("origin")
+        if origin is not None and origin != f"http://{conn.headers.get('host', '')}":
+            return "refused: not from this page"
+        if not _same_token(conn.headers.get(TOKEN_HEADER) or conn.query_params.get("token"), token):
+            return "refused: the dashboard's token is needed (the URL printed at its start carries it)"
+        return None
 
-    def same_origin(headers: Any) -> bool:
-        """A request from this page (or from no page): another site's page must not act on the cell."""
-        origin = headers.get("origin")
-        return origin is None or origin == f"http://{headers.get('host', '')}"
+    def payload(t: float | None) -> dict[str, Any]:
+        return {**view.view(t), "controls": controls}
+
+    async def view_json(request: Request) -> JSONResponse:
+        if (why := refused(request)) is not None:
+            return JSONResponse({"success": False, "message": why}, status_code=403)
+        return JSONResponse(payload(at(request.query_params.get("t"))))
 
     async def ws(socket: WebSocket) -> None:
-        if not same_origin(socket.headers):
-            await socket.close(code=1008)
+        if refused(socket) is not None:
+            await socket.close(code=1008)  # before accept: the handshake is answered 403
             return
         await socket.accept()
         t: float | None = None
         try:
             while True:
-                await socket.send_text(json.dumps(view.view(t)))
+                await socket.send_text(json.dumps(payload(t)))
                 try:  # the page may pick a time (bag mode: the slider); else the latest
                     msg = json.loads(await asyncio.wait_for(socket.receive_text(), timeout=PUSH_SECONDS))
                     t = at(msg.get("t")) if isinstance(msg, dict) else t
@@ -375,28 +449,38 @@ def make_app(view: CellView, feed: LiveFeed | None = None) -> Any:
             return
 
     async def world(request: Request) -> JSONResponse:
+        why = refused(request) or (None if request.headers.get("content-type") == "application/json"
+                                   else "refused: not from this page")
+        if why is None and read_only:
+            why = "refused: a read-only dashboard"
+        if why is not None:
+            return JSONResponse({"success": False, "message": why}, status_code=403)
         if feed is None:
             return JSONResponse({"success": False, "message": "a recorded run: the world cannot be changed"})
-        if not same_origin(request.headers) or request.headers.get("content-type") != "application/json":
-            return JSONResponse({"success": False, "message": "refused: not from this page"}, status_code=403)
-        try:
-            body = await request.json()
-            if not isinstance(body, dict):
-                raise ValueError("expected a JSON object")
-            kind, target = str(body.get("kind", "")), str(body.get("target", ""))
-            tasks = None
-            if kind == "submit":
-                tasks = _tasks_from_text(str(body.get("text", "")), str(body.get("file", "tasks.yaml")))
-            if kind in ("fault", "repair"):
-                ok, message = await asyncio.to_thread(feed.call, "fault", target=target, failed=kind == "fault")
-            else:
-                ok, message = await asyncio.to_thread(feed.call, kind, tasks=tasks, target=target)
-        except (LvwsError, ValueError) as exc:
-            ok, message = False, str(exc)
-        return JSONResponse({"success": ok, "message": message})
+        return JSONResponse(await _act(feed, request))
 
     return Starlette(routes=[Route("/", page), Route("/plotly.min.js", script), Route("/view", view_json),
                              WebSocketRoute("/ws", ws), Route("/world", world, methods=["POST"])])
+
+
+async def _act(feed: LiveFeed, request: Any) -> dict[str, Any]:
+    """One control action of the page (a JSON body: kind, target, or a YAML file's text):
+    the simulator's answer."""
+    try:
+        body = await request.json()
+        if not isinstance(body, dict):
+            raise ValueError("expected a JSON object")
+        kind, target = str(body.get("kind", "")), str(body.get("target", ""))
+        tasks = None
+        if kind == "submit":
+            tasks = _tasks_from_text(str(body.get("text", "")), str(body.get("file", "tasks.yaml")))
+        if kind in ("fault", "repair"):
+            ok, message = await asyncio.to_thread(feed.call, "fault", target=target, failed=kind == "fault")
+        else:
+            ok, message = await asyncio.to_thread(feed.call, kind, tasks=tasks, target=target)
+    except (LvwsError, ValueError) as exc:
+        ok, message = False, str(exc)
+    return {"success": ok, "message": message}
 
 
 def _tasks_from_text(text: str, name: str) -> list[dict[str, Any]]:
@@ -409,18 +493,39 @@ def _tasks_from_text(text: str, name: str) -> list[dict[str, Any]]:
         return tasks_from_file(path)
 
 
-def serve(view: CellView, feed: LiveFeed | None, host: str, port: int,
-          started: Callable[[str], None] = print) -> None:
-    """Serve the page until Ctrl-C (or the server stops)."""
+def serve(view: CellView, feed: LiveFeed | None, host: str, port: int, *, token: str | None = None,
+          read_only: bool = False, started: Callable[[str], None] | None = None) -> None:
+    """Serve the page until Ctrl-C (or the server stops). ``token`` None: a new one, printed
+    in the page's URL; a given one is not printed. uvicorn's access log is off (it would
+    show the websocket's ``?token=``)."""
     import uvicorn
 
     from lvws_ros.ros.launcher import check_port
 
     check_port(host, port)
-    config = uvicorn.Config(make_app(view, feed), host=host, port=port, log_level="warning", lifespan="off")
+    given = token is not None
+    token = token if token is not None else new_token()
+    app = make_app(view, feed, token=token, read_only=read_only)
+    config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off", access_log=False)
     server = uvicorn.Server(config)
-    started(f"dashboard: http://{host}:{port}/ ({view.source})")
+    shown = socket_host(host)
+    query = "" if given else f"?token={token}"
+    line = (f"dashboard: http://{shown}:{port}/{query} ({view.source}"
+            f"{', read-only' if read_only or feed is None else ''}{'; open it with your token' if given else ''})")
+    if started is None:
+        print(line, flush=True)
+    else:
+        started(line)
     server.run()
+
+
+def socket_host(host: str) -> str:
+    """How a browser reaches ``host``: this machine's name for an address of every interface."""
+    import socket
+
+    if host in ("0.0.0.0", "::", ""):
+        return socket.gethostname()
+    return f"[{host}]" if ":" in host else host
 
 
 def parser() -> argparse.ArgumentParser:
@@ -435,13 +540,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--domain-id", type=int, default=None, help="the live cell's ROS_DOMAIN_ID")
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT})")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
+    p.add_argument("--token", default=None,
+                   help=f"the token the page and its controls need (default: ${TOKEN_ENV} if set, else a new one, "
+                        "printed in the page's URL)")
+    p.add_argument("--read-only", action="store_true", help="serve the views without the controls")
 
 
 def run(args: argparse.Namespace) -> int:
     if not 0 < args.port < 65536:
         raise LvwsError(f"--port must be in 1..65535, got {args.port}")
+    given = args.token if args.token is not None else os.environ.get(TOKEN_ENV) or None
+    token = None if given is None else check_token(given)
     if args.bag:
-        serve(CellView.from_bag(args.bag), None, args.host, args.port)
+        serve(CellView.from_bag(args.bag), None, args.host, args.port, token=token, read_only=True)
         return 0
     from lvws_ros.ros.launcher import check_namespace
     from lvws_ros.ros.world_client import join_domain
@@ -451,7 +562,7 @@ def run(args: argparse.Namespace) -> int:
     view = CellView()
     feed = LiveFeed(view, check_namespace(args.namespace))
     try:
-        serve(view, feed, args.host, args.port)
+        serve(view, feed, args.host, args.port, token=token, read_only=args.read_only)
     finally:
         feed.close()
     return 0

@@ -21,6 +21,7 @@ import ctypes
 import json
 import os
 import random
+import secrets
 import signal
 import socket
 import subprocess
@@ -37,6 +38,12 @@ from lvws_ros.errors import ConfigError, LaunchError, PolicyError
 from lvws_ros.ros.topics import CLOCK_REMAP
 
 PR_SET_PDEATHSIG = 1
+DASHBOARD_TOKEN_ENV = "LVWS_DASHBOARD_TOKEN"  # the dashboard's token, given by the environment (never printed)
+
+
+def new_token() -> str:
+    """A fresh token for a dashboard (:func:`secrets.token_urlsafe`: 32 random bytes)."""
+    return secrets.token_urlsafe(32)
 
 
 def _die_with_parent() -> None:
@@ -191,11 +198,13 @@ def _child_env(domain_id: int | None) -> dict[str, str]:
 
 
 def _start(commands: dict[str, list[str]], env: dict[str, str], out: Path, children: list[Child],
-           interrupted: list[int]) -> None:
+           interrupted: list[int], own_env: dict[str, dict[str, str]] | None = None) -> None:
+    """Start the children in order (``own_env``: variables for one child alone)."""
     for cname, cmd in commands.items():
         log_path = out / f"{cname}.log"
         fh = open(log_path, "wb")
-        proc = subprocess.Popen(cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+        proc = subprocess.Popen(cmd, env={**env, **(own_env or {}).get(cname, {})}, stdout=fh,
+                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                 preexec_fn=_die_with_parent)
         children.append(Child(cname, proc, log_path, fh))
         tmp = out / "pids.json.tmp"
@@ -252,7 +261,8 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     The configuration, the parameter file, the policy, the model and the namespace are
     checked before any process starts (ConfigError / PolicyError). ``policy``/``seed``
     None: the parameter file's, else the scheduler's defaults. ``dashboard``: also serve the
-    web dashboard of the run on this port (127.0.0.1) while it lasts."""
+    web dashboard of the run on this port (127.0.0.1) while it lasts, with a new token (the
+    printed URL carries it)."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
 
     namespace = check_namespace(namespace)
@@ -282,10 +292,11 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     t0 = time.monotonic()
     try:
         env = _child_env(domain_id)
-        _start(commands, env, out, children, interrupted)
+        token = new_token()  # the dashboard's, in its environment: its log does not show it
+        _start(commands, env, out, children, interrupted, {"dashboard": {DASHBOARD_TOKEN_ENV: token}})
         log(f"running {run}{' in ' + namespace if namespace else ''} (domain {env['ROS_DOMAIN_ID']}); logs in {out}")
         if dashboard is not None:
-            log(f"dashboard: http://127.0.0.1:{dashboard}/ (while the run lasts)")
+            log(f"dashboard: http://127.0.0.1:{dashboard}/?token={token} (while the run lasts)")
         _supervise(children, timeout, t0, interrupted, log)
     except BaseException:
         codes = stop(children)

@@ -3,13 +3,14 @@
 A frame shows the cells, the objects, every robot (busy: opaque; waiting: faded;
 failed: grey with a cross), each running task's subteam as links from its members to
 the object it works on, a label per robot (id and task) placed so that labels never
-overlap (right of the robot, with a leader line), a legend, the sim time and the tasks
-done. Pictures are 1100 x 800 px.
+overlap (right of the robot, with a leader line; the rule of
+:func:`~lvws_ros.sim.labels.place_labels`), a legend, the sim time and the tasks done.
+Pictures are 1100 x 800 px.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -23,7 +24,10 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch, Rectangle, RegularPolygon
 
 from lvws_ros.sim.config import ARM_KINDS, CellConfig
+from lvws_ros.sim.labels import place_labels
 from lvws_ros.sim.world import Frame
+
+__all__ = ["draw_frame", "place_labels", "render_frames", "render_gif", "render_png"]
 
 COLORS = {"panda": "tab:orange", "jackal": "tab:blue", "husky": "tab:green"}
 FIGSIZE, DPI = (11.0, 8.0), 100  # 1100 x 800 px: the world on the left, the legend on the right
@@ -36,22 +40,6 @@ def _extent(cfg: CellConfig) -> tuple[float, float, float, float]:
     xs = [c.position[0] for c in cfg.cells.values()] + [r.start[0] for r in cfg.robots]
     ys = [c.position[1] for c in cfg.cells.values()] + [r.start[1] for r in cfg.robots]
     return min(xs) - 3, max(xs) + 3, min(ys) - 3.5, max(ys) + 3
-
-
-def place_labels(anchors: Sequence[tuple[float, float]], widths: Sequence[float], height: float,
-                 dx: float = 0.6, dy: float = 0.3) -> list[tuple[float, float]]:
-    """The top-left corner of each anchor's label box (width, height in data units): right
-    of the anchor, at y + dy, y + dy - height, ... the first that overlaps no label placed
-    before (labels never overlap, wherever the robots stand)."""
-    placed: list[tuple[float, float, float]] = []  # (left, top, width)
-    out = []
-    for (x, y), w in zip(anchors, widths, strict=True):
-        left, top = x + dx, y + dy
-        while any(left < pl + pw and pl < left + w and abs(top - pt) < height for pl, pt, pw in placed):
-            top -= height
-        placed.append((left, top, w))
-        out.append((left, top))
-    return out
 
 
 def _legend() -> list[Patch | Line2D]:
@@ -146,15 +134,18 @@ def render_png(cfg: CellConfig, frame: Frame, total_tasks: int, path: str | Path
     return out
 
 
-def render_gif(cfg: CellConfig, frames: Sequence[Frame], total_tasks: int, path: str | Path, fps: int = 8) -> Path:
-    """An animated GIF of the recorded frames (matplotlib's Pillow writer), 1100 x 800 px."""
+def render_gif(cfg: CellConfig, frames: Sequence[Frame], total_tasks: int, path: str | Path, fps: int = 8,
+               progress: Callable[[int, int], None] | None = None) -> Path:
+    """An animated GIF of the recorded frames (matplotlib's Pillow writer), 1100 x 800 px;
+    ``progress(frames drawn, frames)`` after each frame (a long GIF takes a while)."""
     if not frames:
         raise ValueError("no frames recorded")
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig, ax = _figure()
     anim = FuncAnimation(fig, lambda k: draw_frame(ax, cfg, frames[k], total_tasks), frames=len(frames))
-    anim.save(str(out), writer=PillowWriter(fps=fps))
+    anim.save(str(out), writer=PillowWriter(fps=fps),
+              progress_callback=None if progress is None else lambda k, n: progress(k + 1, n))
     plt.close(fig)
     return out
 

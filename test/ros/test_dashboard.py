@@ -7,6 +7,7 @@ goes on and the cancel button cancels a task in the simulator."""
 from __future__ import annotations
 
 import itertools
+import re
 import shutil
 import socket
 import subprocess
@@ -68,6 +69,28 @@ def test_the_view_of_the_reference_bag():
     assert sum(durations[k] for k in crit) == pytest.approx(_chains(start))  # and a longest one
 
 
+def _boxes_overlap(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    return (a["x"] < b["x"] + b["width"] and b["x"] < a["x"] + a["width"]
+            and a["y"] - a["height"] < b["y"] and b["y"] - b["height"] < a["y"])
+
+
+def test_the_cell_labels_never_overlap_where_robots_share_a_site():
+    cell = CellView.from_bag(REFERENCE_BAG)
+    shared = 0
+    for t in [*sorted({s.stamp for s in cell.teams})[::5], 0.0, cell.end_time()]:
+        c = cell.view(t)["cell"]
+        marks = [(s["x"], s["y"]) for s in c["sites"]] + [(r["x"], r["y"]) for r in c["robots"]]
+        shared += len(marks) - len(set(marks))
+        labels = c["labels"]
+        assert [lb["text"] for lb in labels] == [s["name"] for s in c["sites"]] + [r["id"] for r in c["robots"]]
+        assert all(lb["anchor"] == [x, y] for lb, (x, y) in zip(labels, marks, strict=True))
+        assert not [(a["text"], b["text"]) for a, b in itertools.combinations(labels, 2) if _boxes_overlap(a, b)]
+        (x0, x1), (y0, y1) = c["range"]["x"], c["range"]["y"]
+        assert all(x0 <= lb["x"] and lb["x"] + lb["width"] <= x1 and y0 <= lb["y"] - lb["height"]
+                   and lb["y"] <= y1 for lb in labels)  # every label inside the picture
+    assert shared > 0  # robots stood on sites, and on each other's: the case the rule is for
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -103,14 +126,29 @@ def _executed(page: Any) -> int:
     return int(page.eval_on_selector("#gantt", "e => Number(e.dataset.executed || 0)"))
 
 
+def _printed_url(log: Path, port: int, proc: subprocess.Popen[str], seconds: float = 120.0) -> str:
+    """The page's URL with its token, as printed (by lvws dashboard or lvws launch)."""
+    pattern = re.compile(rf"dashboard: (http://127\.0\.0\.1:{port}/\?token=[A-Za-z0-9_-]+)")
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if (m := pattern.search(log.read_text())) is not None:
+            return m.group(1)
+        assert proc.poll() is None, log.read_text()
+        time.sleep(0.2)
+    raise AssertionError(f"no URL printed: {log.read_text()}")
+
+
 def test_the_page_of_a_bag_in_a_real_browser(tmp_path):
     port = _free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.dashboard", "--bag", str(REFERENCE_BAG),
-                             "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    log = tmp_path / "dashboard.txt"
+    with open(log, "w") as out:
+        proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.dashboard", "--bag", str(REFERENCE_BAG),
+                                 "--port", str(port)], stdout=out, stderr=subprocess.STDOUT, text=True)
     try:
         _wait_for_url(port, proc)
+        url = _printed_url(log, port, proc)
         with _browser() as page:
-            page.goto(f"http://127.0.0.1:{port}/")
+            page.goto(url)
             page.wait_for_function("() => window.lastView && document.querySelector('#gantt .barlayer')")
             pairs = sum(len(x.assigned_robots) for x in CellView.from_bag(REFERENCE_BAG).graphs[-1].tasks)
             assert _executed(page) == pairs  # a bar per (task, robot) of the run
@@ -120,10 +158,14 @@ def test_the_page_of_a_bag_in_a_real_browser(tmp_path):
             page.eval_on_selector("#slider", "e => { e.value = '0'; e.dispatchEvent(new Event('input')); }")
             page.wait_for_function("() => window.lastView.time === 0")
             assert 0 < _executed(page) < pairs  # only the tasks started at 0
+            assert int(page.eval_on_selector("#cell", "e => Number(e.dataset.labels || 0)")) == 12  # 6 sites, 6 robots
             page.screenshot(path=str(tmp_path / "bag.png"), full_page=True)
+            page.goto(url.split("?")[0])  # without the token: no view, and the page says why
+            page.wait_for_function("() => document.querySelector('#refused').textContent.includes('token')")
+            assert not page.evaluate("() => window.lastView")
     finally:
         proc.terminate()
-        proc.communicate(timeout=30)
+        proc.wait(timeout=30)
 
 
 def test_the_page_beside_a_live_run_gains_bars_and_cancels_a_task(tmp_path):
@@ -131,11 +173,14 @@ def test_the_page_beside_a_live_run_gains_bars_and_cancels_a_task(tmp_path):
     cmd = [sys.executable, "-m", "lvws_ros.cli", "launch", "--policy", "grp", "--rate", "4", "--no-gif",
            "--bag-dir", str(tmp_path / "bags"), "--out-dir", str(tmp_path / "out"), "--name", "dash",
            "--dashboard", str(port)]
-    run = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    log = tmp_path / "launch.txt"
+    with open(log, "w") as out:
+        run = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, text=True)
     try:
         _wait_for_url(port, run, 120.0)
+        url = _printed_url(log, port, run)  # lvws launch prints the page's URL with the dashboard's token
         with _browser() as page:
-            page.goto(f"http://127.0.0.1:{port}/")
+            page.goto(url)
             page.wait_for_function("() => Number(document.querySelector('#gantt').dataset.executed) > 0",
                                    timeout=60_000)
             first = _executed(page)
@@ -148,13 +193,15 @@ def test_the_page_beside_a_live_run_gains_bars_and_cancels_a_task(tmp_path):
                                    timeout=30_000)
             page.wait_for_function("() => !window.lastView.tasks.some(t => t.id === 't14')", timeout=30_000)
             page.screenshot(path=str(tmp_path / "live.png"), full_page=True)
-        out, _ = run.communicate(timeout=300)
-        assert run.returncode == 0, out
+        assert run.wait(timeout=300) == 0, log.read_text()
+        out = log.read_text()
         assert "13/13 tasks" in out, out[-2000:]
+        token = url.split("token=")[1]
+        assert token not in (tmp_path / "out" / "dash" / "dashboard.log").read_text()  # never in a log file
     finally:
         if run.poll() is None:
             run.terminate()
-            run.communicate(timeout=60)
+            run.wait(timeout=60)
 
 
 @pytest.mark.parametrize("args, says", [(["--bag", "no/such/bag"], "no such bag"),
