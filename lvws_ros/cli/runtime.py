@@ -6,13 +6,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from lvws_ros.errors import LaunchError, WorldStuck
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
 from lvws_ros.ros.dashboard import DEFAULT_PORT
 from lvws_ros.ros.dashboard import add_arguments as dashboard_arguments
+
+T = TypeVar("T")
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
@@ -77,6 +80,10 @@ def _options(args: argparse.Namespace, name: str) -> dict[str, Any]:
 def _compare_travel(cfg: Any, args: argparse.Namespace) -> int:
     """``lvws sim --compare``: each policy planned with travel, executed told the travel
     and not (lvws_ros.sim.runner.compare_travel), as a table."""
+    from functools import partial
+
+    from tqdm import tqdm
+
     from lvws_ros.errors import PolicyError
     from lvws_ros.registry import make_policy
     from lvws_ros.sim.runner import compare_travel
@@ -91,7 +98,16 @@ def _compare_travel(cfg: Any, args: argparse.Namespace) -> int:
         options = _options(args, name)
         return lambda: make_policy(name, seed=args.seed, **options)
 
-    rows = compare_travel(cfg, [(n, maker(n)) for n in names], noise=args.noise, noise_seed=args.seed)
+    def one(name: str) -> list[Any]:  # a policy's plan and its two runs in the simulator
+        return list(compare_travel(cfg, [(name, maker(name))], noise=args.noise, noise_seed=args.seed))
+
+    rows = []
+    with tqdm(total=len(names), desc="compare: plan, run told the travel, run told none", unit="policy",
+              file=sys.stderr) as bar:
+        for n in names:
+            bar.set_postfix_str(n)
+            rows += _ticking(bar, partial(one, n))
+            bar.update()
     noisy = f", durations x U[{1 - args.noise:g}, {1 + args.noise:g}]" if args.noise else ""
     print(f"{cfg.name}: makespans in seconds of sim time (seed {args.seed}{noisy})")
     print("| policy | plan with travel | executed | executed - plan | executed, scheduler told no travel |")
@@ -99,6 +115,25 @@ def _compare_travel(cfg: Any, args: argparse.Namespace) -> int:
     for r in rows:
         print(f"| {r.policy} | {r.plan:.2f} | {r.executed:.2f} | {100 * r.plan_error:+.2f} % | {r.blind:.2f} |")
     return 0
+
+
+TICK_SECONDS = 1.0  # a progress bar's elapsed time is redrawn this often while a step runs
+
+
+def _ticking(bar: Any, work: Callable[[], T]) -> T:
+    """``work()`` on a thread of its own while ``bar`` (tqdm) redraws its elapsed time every
+    TICK_SECONDS, so that a long step never leaves the terminal silent; its result (or its
+    exception)."""
+    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures import TimeoutError as Pending
+
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        future = pool.submit(work)
+        while True:
+            try:
+                return future.result(timeout=TICK_SECONDS)
+            except Pending:
+                bar.refresh()
 
 
 def cmd_launch(args: argparse.Namespace) -> int:

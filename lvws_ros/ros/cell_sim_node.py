@@ -331,7 +331,15 @@ class CellSimNode(Node):
             from lvws_ros.sim.render import render_gif
 
             self.sim.record_frame()
-            summary["gif"] = str(render_gif(self.sim.cfg, self.sim.trace, len(self.sim.status), self.gif_path))
+            shown = [time.monotonic()]
+
+            def drawn(k: int, n: int) -> None:  # a progress line every 2 s (lvws launch prints them)
+                if k == n or time.monotonic() - shown[0] >= 2.0:
+                    shown[0] = time.monotonic()
+                    self.get_logger().info(f"progress: the run ended; writing the GIF, frame {k}/{n}")
+
+            summary["gif"] = str(render_gif(self.sim.cfg, self.sim.trace, len(self.sim.status), self.gif_path,
+                                            progress=drawn))
         if self.summary_path:
             Path(self.summary_path).parent.mkdir(parents=True, exist_ok=True)
             Path(self.summary_path).write_text(json.dumps(summary, indent=1))
