@@ -151,6 +151,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         return 1
     gantt = res.out_dir / "gantt.png"
     s = res.summary
+    print("reading the bag back and drawing the Gantt chart ...", flush=True)
     print(report(res.bag, gantt).text())
     print()
     print(f"makespan:  {s.get('makespan')} s (sim time), {s.get('tasks_done')}/{s.get('tasks')} tasks")
@@ -265,7 +266,8 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--events", default=None, help="scripted world events (YAML: at t, submit / cancel / fail / "
                                                    "repair); see lvws_ros/sim/events.py")
     p.add_argument("--dashboard", type=int, nargs="?", const=DEFAULT_PORT, default=None, metavar="PORT",
-                   help=f"serve the run's web dashboard on 127.0.0.1:PORT while it lasts (default port {DEFAULT_PORT})")
+                   help=f"serve the run's web dashboard on 127.0.0.1:PORT while it lasts (default port {DEFAULT_PORT}; "
+                        "the printed URL carries its token)")
 
     for name, help_text in (
             ("submit", "add tasks to a running cell (cell_sim's submit_tasks service)"),

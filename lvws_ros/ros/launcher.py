@@ -305,6 +305,7 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+    log(f"  [{time.monotonic() - t0:5.1f} s] the run is over: stopping the other nodes (the recorder closes the bag)")
     codes = stop(children)
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
     summary.update({"wall_seconds_total": time.monotonic() - t0, "exit_codes": codes})
