@@ -102,10 +102,12 @@ class State:
         running = self.task_status == TaskStatus.ASSIGNED
         finished = running & (self.task_end <= self.time + TOLERANCE)
         self.task_status[finished] = TaskStatus.DONE
-        done = self.task_status == TaskStatus.DONE
-        for j in np.flatnonzero(self.task_status == TaskStatus.QUEUED):
-            if all(done[p] for p in inst.prerequisites[j]):
-                self.task_status[j] = TaskStatus.READY
+        queued = self.task_status == TaskStatus.QUEUED
+        if queued.any():
+            task, pre = inst.prerequisite_edges
+            waiting = np.zeros(len(queued), dtype=bool)  # a prerequisite not done yet
+            waiting[task[self.task_status[pre] != TaskStatus.DONE]] = True
+            self.task_status[queued & ~waiting] = TaskStatus.READY
 
     def arrival(self, task: int, team: Sequence[int]) -> float:
         """Seconds until the last member of ``team`` can be at ``task`` (0 without travel;

@@ -146,6 +146,14 @@ class Instance:
         return tuple(tuple(self.task_index[p] for p in t.after) for t in self.tasks)
 
     @cached_property
+    def prerequisite_edges(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """The edges of P as two arrays (task, prerequisite): what a vectorised readiness
+        test needs."""
+        pairs = [(j, i) for j, pre in enumerate(self.prerequisites) for i in pre]
+        edges = np.array(pairs, dtype=np.int64).reshape(-1, 2)
+        return edges[:, 0].copy(), edges[:, 1].copy()
+
+    @cached_property
     def successors(self) -> tuple[tuple[int, ...], ...]:
         succ: list[list[int]] = [[] for _ in self.tasks]
         for j, pre in enumerate(self.prerequisites):

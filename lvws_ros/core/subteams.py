@@ -124,6 +124,10 @@ def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
     a = a[(a > 0).any(axis=1)]
     if not len(need):
         return True
+    if len(a) <= SMALL_ROLE_TEAM:
+        return _role_cover_small(a.tolist(), need.tolist())
+    if _role_cover_greedy(a, need):  # an assignment found at once: no search needed
+        return True
     a = a[np.lexsort((*a.T[::-1], (a > 0).sum(axis=1)))]  # fewest traits first; identical rows adjacent
     n, k_all = a.shape
     same = np.zeros(n, dtype=bool)
@@ -152,6 +156,57 @@ def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
             nxt[k] -= a[i, k]
             stack.append((i + 1, nxt, int(k)))  # the largest contribution (then the first trait) is popped first
     return False
+
+
+SMALL_ROLE_TEAM = 12  # role_cover: up to this many members, a search in plain Python (no array per node)
+
+
+def _role_cover_greedy(a: FloatArray, need: FloatArray) -> bool:
+    """A sufficient test for :func:`role_cover`: the traits in turn, the largest need
+    first, each filled by the members not yet given one with the most of it (True: every
+    trait filled so, an assignment that proves the cover; False says nothing)."""
+    free = np.ones(len(a), dtype=bool)
+    for c in np.argsort(-need, kind="stable"):
+        have = np.where(free, a[:, c], 0.0)
+        order = np.argsort(-have, kind="stable")
+        got = np.cumsum(have[order])
+        enough = int(np.searchsorted(got, need[c] - TOLERANCE))
+        if enough >= len(order) or have[order[enough]] <= 0:
+            return False
+        free[order[:enough + 1]] = False
+    return True
+
+
+def _role_cover_small(a: list[list[float]], need: list[float]) -> bool:
+    """:func:`role_cover` for a few members (rows ``a``, the needed traits only): the same
+    depth-first search in plain floats, pruned by what the members left can bring to each
+    trait and memoised on (member, what is left)."""
+    n, k = len(a), len(need)
+    rest = [[0.0] * k for _ in range(n + 1)]  # what members i.. bring to each trait
+    for i in range(n - 1, -1, -1):
+        rest[i] = [rest[i + 1][c] + a[i][c] for c in range(k)]
+    seen: set[tuple[int, tuple[float, ...]]] = set()
+
+    def search(i: int, left: tuple[float, ...]) -> bool:
+        if all(x <= TOLERANCE for x in left):
+            return True
+        if i == n or any(left[c] > rest[i][c] + TOLERANCE for c in range(k)):
+            return False
+        key = (i, tuple(round(x, 9) for x in left))
+        if key in seen:
+            return False
+        seen.add(key)
+        row = a[i]
+        useful = sorted((c for c in range(k) if row[c] > 0 and left[c] > TOLERANCE),
+                        key=lambda c: (-min(row[c], left[c]), c))  # the largest contribution first
+        for c in useful:
+            if search(i + 1, (*left[:c], left[c] - row[c], *left[c + 1:])):
+                return True
+        return search(i + 1, left)  # this member fills no slot
+
+    if sum(max(min(x, w) for x, w in zip(row, need, strict=True)) for row in a) < sum(need) - TOLERANCE:
+        return False  # each member fills one slot: even their largest useful amounts fall short
+    return search(0, tuple(need))
 
 
 def role_shortfall(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> FloatArray:

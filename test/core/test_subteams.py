@@ -139,3 +139,27 @@ def test_the_boolean_model_never_accepts_a_short_subteam_and_accepts_exact_fract
                       (Task("t0", (1,), 1.0, 1.0),))
     res = solve_exact(thirds, workers=2, formulation="boolean", time_limit=20)
     assert res.proven and res.schedule is not None and check_schedule(thirds, res.schedule) == []
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.integers(1, 14), st.integers(1, 4), st.integers(0, 2**32 - 1))
+def test_the_role_rule_is_the_same_whichever_search_decides_it(n, k, seed):
+    """Roles (each member fills one trait): the plain-float search for a few members, the
+    greedy assignment and the array search for many give the same answer; checked against
+    an exhaustive assignment of members to traits."""
+    import itertools
+
+    from lvws_ros.core import subteams
+
+    rng = np.random.default_rng(seed)
+    caps = rng.integers(0, 4, size=(n, k)).astype(float) * (rng.random((n, k)) < 0.6)
+    need = rng.integers(0, 6, size=k).astype(float)
+    got = []
+    for small in (0, subteams.SMALL_ROLE_TEAM):
+        with patch.object(subteams, "SMALL_ROLE_TEAM", small):
+            got.append(subteams.role_cover(caps, need))
+    if n <= 7:  # every assignment of each member to one trait or none
+        brute = any(all(sum(caps[i, c] for i in range(n) if pick[i] == c) >= need[c] - 1e-9 for c in range(k))
+                    for pick in itertools.product(range(-1, k), repeat=n))
+        got.append(brute)
+    assert len(set(got)) == 1, (caps.tolist(), need.tolist(), got)
