@@ -232,14 +232,14 @@ def _supervise(children: list[Child], timeout: float, t0: float, interrupted: li
     """Until the simulator (the last child) exits, printing its progress; LaunchError when
     anything goes wrong."""
     sim = children[-1]
-    shown, next_show = "", time.monotonic() + PROGRESS_EVERY
+    shown, next_show, said = "", time.monotonic() + PROGRESS_EVERY, time.monotonic()
     while sim.alive():
         if time.monotonic() >= next_show:
             next_show += PROGRESS_EVERY
             now = _progress(sim)
-            if now and now != shown:
-                log(f"  [{time.monotonic() - t0:5.1f} s] {now}")
-                shown = now
+            if now and (now != shown or time.monotonic() - said >= 2.5 * PROGRESS_EVERY):  # new, or still so
+                log(f"  [{time.monotonic() - t0:5.1f} s] {now}{'' if now != shown else ' (still)'}")
+                shown, said = now, time.monotonic()
         if interrupted:
             raise LaunchError(f"interrupted by signal {signal.Signals(interrupted[0]).name}")
         for c in children[:-1]:

@@ -47,3 +47,19 @@ def test_a_failing_step_raises_its_own_error():
 
     with tqdm(total=1, file=io.StringIO()) as bar, pytest.raises(ValueError, match="the step's own error"):
         _ticking(bar, fails)
+
+
+def test_the_gif_reports_each_frame_drawn(tmp_path):
+    from lvws_ros.registry import make_policy
+    from lvws_ros.ros.resources import case_study_config
+    from lvws_ros.sim.config import load_cell_config
+    from lvws_ros.sim.render import render_gif
+    from lvws_ros.sim.runner import run_offline
+    from lvws_ros.sim.world import CellSim
+
+    sim = CellSim(load_cell_config(case_study_config()))
+    run_offline(sim, make_policy("grp"), frame_every=30.0)
+    seen: list[tuple[int, int]] = []
+    render_gif(sim.cfg, sim.trace, 14, tmp_path / "run.gif", progress=lambda k, n: seen.append((k, n)))
+    n = len(sim.trace)
+    assert n >= 4 and seen == [(k, n) for k in range(1, n + 1)]
