@@ -19,8 +19,9 @@ Model (per remaining task j, start S_j):
     use), start windows from longest paths before/after each task, and a hint from the
     best heuristic schedule, which also bounds the horizon.
 
-When some robots are interchangeable (:mod:`~lvws_ros.core.pools`: the same trait
-amounts and payload) and there is no travel, the *pool model* replaces the per-robot one:
+When most robots are interchangeable (:mod:`~lvws_ros.core.pools`: the same trait
+amounts and payload; :func:`pools_apply`), there is no travel and the team is too large
+to list its minimal coalitions, the *pool model* replaces the per-robot boolean one:
 per task an integer count per pool (at most what an inclusion-minimal subteam holds)
 whose summed amounts cover it (with roles, counts per pool and required trait, a
 matching of members to required units), per pool a cumulative over the tasks' intervals
@@ -580,7 +581,9 @@ def _pool_cover(model: cp_model.CpModel, inst: Instance, j: int, found: Sequence
     count: dict[int, cp_model.IntVar] = {}
     for p, pool in enumerate(found):
         bound = _pool_bound(inst, j, pool)
-        if bound > 0:
+        if bound == 1 and pool.size == 1:  # a literal: the robot's optional interval is present with it
+            count[p] = model.new_bool_var(f"n_{j}_{p}")
+        elif bound > 0:
             count[p] = model.new_int_var(0, bound, f"n_{j}_{p}")
     give: dict[tuple[int, int], Any] = {(p, c): n for p, n in count.items() for c in cols}
     if inst.task_roles[j]:
@@ -626,8 +629,18 @@ def _build_pool_model(inst: Instance, h: _Horizon, found: Sequence[Pool], now: i
     _sequencing(model, inst, h, start, makespan, [])
     task_iv = {j: model.new_fixed_size_interval_var(start[j], h.dur[j], f"I_{j}") for j in h.todo}
     for p, pool in enumerate(found):
-        ivs = [task_iv[j] for j in h.todo if p in count[j]]
-        demands: list[Any] = [count[j][p] for j in h.todo if p in count[j]]
+        users = [j for j in h.todo if p in count[j]]
+        if pool.size == 1:  # a robot of its own: optional intervals and a no-overlap, as per robot
+            r = pool.robots[0]
+            for j in users:
+                if h.free_at[r] > h.head[j]:
+                    model.add(start[j] >= h.free_at[r]).only_enforce_if(count[j][p])
+            if len(users) > 1:
+                model.add_no_overlap([model.new_optional_fixed_size_interval_var(start[j], h.dur[j], count[j][p],
+                                                                                 f"I_{p}_{j}") for j in users])
+            continue
+        ivs = [task_iv[j] for j in users]
+        demands: list[Any] = [count[j][p] for j in users]
         for r in pool.robots:  # busy: one unit held until the robot is free
             if h.free_at[r] > now:
                 ivs.append(model.new_fixed_size_interval_var(now, h.free_at[r] - now, f"busy_{r}"))
@@ -683,17 +696,22 @@ def _pool_solution(inst: Instance, state: State, h: _Horizon, m: _PoolModel, fou
 FORMULATIONS = ("auto", "coalition", "boolean", "pool")
 
 
-def chosen_formulation(inst: Instance, state: State | None = None, formulation: str = "auto") -> str:
-    """The formulation ``solve_exact`` solves: "pool" under "auto" when some robots are
-    interchangeable (:mod:`~lvws_ros.core.pools`) and there is no travel; else the
-    coalition model for small teams, the boolean one for large (:func:`_coalitions`)."""
+def pools_apply(inst: Instance, state: State | None = None) -> bool:
+    """Whether the pool model stands for the per-robot one: no travel, and at least half
+    of the robots interchangeable with another (:mod:`~lvws_ros.core.pools`). With a
+    few small pools among robots of their own, the per-robot boolean model's no-overlaps
+    did better (a 17-robot instance of the mixed family with pools of 2 and 3, 60 s)."""
+    if inst.travel is not None:
+        return False
+    found = pools(inst, state)
+    return not trivial(found) and 2 * sum(p.size for p in found if p.size > 1) >= inst.num_robots
+
+
+def _check_formulation(inst: Instance, formulation: str) -> None:
     if formulation not in FORMULATIONS:
         raise ExpertError(f"unknown formulation {formulation!r} ({' | '.join(FORMULATIONS)})")
     if formulation == "pool" and inst.travel is not None:
         raise ExpertError("the pool model has no travel: use the coalition or boolean formulation")
-    if formulation == "auto" and inst.travel is None and not trivial(pools(inst, state)):
-        return "pool"
-    return formulation
 
 
 def solve_exact(
@@ -712,12 +730,14 @@ def solve_exact(
     ``formulation``: "coalition" lists the minimal covering subteams of each task (fast
     for small teams), "boolean" uses a robot-task boolean per pair (any team size),
     "pool" a count per pool of interchangeable robots and task (no travel), "auto"
-    (default) takes the pool model when some robots are interchangeable and there is no
-    travel, else the coalition model when the team has at most MAX_ENUMERATED robots and
-    the coalitions number at most COALITION_LIMIT. The result's ``model`` says which
-    was solved. ``work``: a limit of CP-SAT's deterministic time too (with ``workers`` =
+    (default) takes the coalition model when the team has at most MAX_ENUMERATED robots
+    and the coalitions number at most COALITION_LIMIT (on such small teams it proves
+    faster than the pool model, measured on Datasets I-III and the mspsp family), else
+    the pool model when most robots are interchangeable and there is no travel
+    (:func:`pools_apply`), else the boolean one. The result's ``model`` says which was
+    solved. ``work``: a limit of CP-SAT's deterministic time too (with ``workers`` =
     1 the same result on every run)."""
-    formulation = chosen_formulation(inst, state, formulation)
+    _check_formulation(inst, formulation)
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state.copy()
     state.refresh()
@@ -727,6 +747,8 @@ def solve_exact(
         sched = schedule_from_state(state, "exact")
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
     h = _horizon(inst, state, todo, hint, coalitions=formulation in ("auto", "coalition"))
+    if formulation == "auto" and h.teams is None and pools_apply(inst, state):
+        formulation = "pool"  # the horizon without coalitions is the pool model's
     if formulation == "pool":
         found = pools(inst, state)
         pm = _build_pool_model(inst, h, found, h.ticks(state.time))

@@ -24,8 +24,9 @@ does, whose arcs carry the travel; with the objective "return", the way home. On
 window's worth of later tasks is in the model then (the circuits grow with the square of
 a robot's tasks in the model), and the window holds DEFAULT_WINDOW_TRAVEL tasks by default.
 
-When some robots are interchangeable (:mod:`~lvws_ros.core.pools`) and there is no
-travel, the windows are over pools: the window's tasks choose a count per pool (the exact
+When most robots are interchangeable (:func:`~lvws_ros.policies.exact.pools_apply`: no
+travel) and the team has more than MAX_ENUMERATED robots (where the exact expert solves
+its pool model too), the windows are over pools: the window's tasks choose a count per pool (the exact
 expert's pool model) and their starts, the later tasks keep their counts per pool (not
 their robots) and move, and per pool one cumulative holds the counts, each robot taking a
 unit until the prefix leaves it free; the robots are given afterwards, exactly. Without a
@@ -51,10 +52,10 @@ import numpy as np
 from ortools.sat.python import cp_model
 
 from lvws_ros.core.executor import State, TaskStatus
-from lvws_ros.core.pools import Pool, assign_units, pools, trivial
+from lvws_ros.core.pools import Pool, assign_units, pools
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
-from lvws_ros.core.subteams import TOLERANCE, covers, prune
+from lvws_ros.core.subteams import MAX_ENUMERATED, TOLERANCE, covers, prune
 from lvws_ros.errors import ExpertError
 from lvws_ros.policies.exact import (
     _add_travel,
@@ -67,6 +68,7 @@ from lvws_ros.policies.exact import (
     _upper,
     covering_members,
     left_shift,
+    pools_apply,
 )
 
 DEFAULT_WINDOW = 12  # tasks re-planned per neighbourhood
@@ -315,8 +317,9 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     state = State.initial(inst) if state is None else state
     best = left_shift(inst, incumbent, state)
     first = float(best.makespan)
-    found = pools(inst, state) if inst.travel is None else ()
-    pooled = bool(found) and not trivial(found)  # interchangeable robots: windows over pools
+    # mostly interchangeable robots in a team past the coalition model's size: windows over pools
+    pooled = inst.num_robots > MAX_ENUMERATED and pools_apply(inst, state)
+    found = pools(inst, state) if pooled else ()
     if window is None:
         window = DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if inst.travel is None else DEFAULT_WINDOW_TRAVEL
     if window < 1:

@@ -142,7 +142,7 @@ def test_the_pool_model_proves_the_per_robot_optimum(roles, objective):
     for inst in cases:
         assert not trivial(pools(inst))
         per_robot = solve_exact(inst, workers=2, time_limit=60, formulation="coalition")
-        pooled = solve_exact(inst, workers=2, time_limit=60)
+        pooled = solve_exact(inst, workers=2, time_limit=60, formulation="pool")
         assert pooled.model == "pool" and per_robot.model == "coalition"
         assert per_robot.proven and pooled.proven, inst.name
         assert pooled.makespan == pytest.approx(per_robot.makespan), inst.name
@@ -153,14 +153,14 @@ def test_the_pool_model_proves_the_per_robot_optimum(roles, objective):
 def test_the_pool_model_on_the_paper_recipe_with_twins_and_from_a_mid_run_state(index):
     inst = with_twins(dataset_instance(DATASETS["I"], index, seed=0), [1, 0, 2])
     per_robot = solve_exact(inst, workers=2, time_limit=60, formulation="coalition")
-    pooled = solve_exact(inst, workers=2, time_limit=60)
+    pooled = solve_exact(inst, workers=2, time_limit=60, formulation="pool")
     assert pooled.model == "pool" and pooled.proven and per_robot.proven
     assert pooled.makespan == pytest.approx(per_robot.makespan)
     grp = simulate(inst, GreedyPayloadPolicy(), record_states=True)
     state = grp.steps[2].state  # some robots busy: they join their pool when free
     assert state is not None and (state.robot_free_at > state.time).any()
     a = solve_exact(inst, state=state, workers=2, time_limit=60, formulation="coalition")
-    b = solve_exact(inst, state=state, workers=2, time_limit=60)
+    b = solve_exact(inst, state=state, workers=2, time_limit=60, formulation="pool")
     assert b.model == "pool" and a.proven and b.proven
     assert b.makespan == pytest.approx(a.makespan)
     assert check_schedule(inst, b.schedule) == []
@@ -174,7 +174,7 @@ def test_the_pool_model_brute_force_on_tiny_twins():
         rng = np.random.default_rng(3000 + seed)
         base = random_instance(rng, 2, int(rng.integers(2, 5)), f"tiny{seed}")
         inst = with_twins(base, [1, int(rng.integers(0, 2))])
-        res = solve_exact(inst, workers=2)
+        res = solve_exact(inst, workers=2, formulation="pool")
         assert res.model == "pool" and res.proven
         assert res.makespan == pytest.approx(brute_force_makespan(inst))
 
@@ -186,7 +186,7 @@ def test_pool_schedules_pass_lvws_check(tmp_path):
     from lvws_ros.core.formats import save_instance, save_schedule
 
     inst = twin_instances(3, roles=True)[0]
-    res = solve_exact(inst, workers=2)
+    res = solve_exact(inst, workers=2, formulation="pool")
     save_instance(inst, tmp_path / "i.json")
     save_schedule(res.schedule, tmp_path / "s.json")
     done = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "check", str(tmp_path / "i.json"),
@@ -201,6 +201,21 @@ def test_without_identical_robots_the_per_robot_model_is_solved_as_before():
         per_robot = solve_exact(inst, workers=1, time_limit=60, formulation="coalition")
         assert auto.model == "coalition"
         assert auto.schedule.assignments == per_robot.schedule.assignments
+
+
+def test_auto_solves_pools_where_the_team_is_too_large_for_coalitions():
+    """Small teams keep the coalition model (it proves faster there); a PSPLIB project
+    (41 robots in four pools) gets the pool model."""
+    from pathlib import Path
+
+    from lvws_ros.core.importers import import_psplib
+
+    small = twin_instances(1)[0]
+    assert solve_exact(small, workers=2).model == "coalition"
+    big = import_psplib(Path(__file__).resolve().parents[2] / "examples" / "psplib" / "j301_1.sm")
+    res = solve_exact(big, workers=2, time_limit=30)
+    assert res.model == "pool" and res.proven and res.makespan == 43  # the published optimum
+    assert check_schedule(big, res.schedule) == []
 
 
 def test_the_pool_model_has_no_travel():

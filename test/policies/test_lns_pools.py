@@ -8,12 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from twins import twin_instances
+from twins import twin_instances, with_twins
 
 from lvws_ros.core.executor import simulate
 from lvws_ros.core.importers import import_psplib
 from lvws_ros.core.pools import pools, trivial
 from lvws_ros.core.schedule import check_schedule
+from lvws_ros.core.subteams import MAX_ENUMERATED
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomSubteamPolicy
 from lvws_ros.policies.lns import improve
 
@@ -34,7 +35,9 @@ def test_pool_windows_improve_a_project_and_stay_valid():
 
 @pytest.mark.parametrize("roles", [False, True])
 def test_pool_windows_from_a_mid_run_state_keep_what_has_started(roles):
-    for inst in twin_instances(4, roles=roles):
+    for small in twin_instances(4, roles=roles):
+        inst = with_twins(small, [4] * small.num_robots)  # past the coalition model's size: windows over pools
+        assert inst.num_robots > MAX_ENUMERATED
         run = simulate(inst, RandomSubteamPolicy(seed=1), record_states=True)
         state = run.steps[len(run.steps) // 3].state
         found = improve(inst, run.schedule, state=state, time_limit=60, max_rounds=4, round_limit=0.5, window=3)

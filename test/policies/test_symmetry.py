@@ -48,7 +48,8 @@ def test_permuting_identical_robots_leaves_the_makespan(policy):
 
 def test_permuting_identical_robots_leaves_the_exact_optimum():
     for inst in CASES[:3]:
-        base = solve_exact(inst, workers=2, time_limit=30)
-        other = solve_exact(permuted(inst, 0), workers=2, time_limit=30)
-        assert base.proven and other.proven and other.model == "pool"
-        assert other.makespan == pytest.approx(base.makespan)
+        for formulation in ("auto", "pool"):
+            base = solve_exact(inst, workers=2, time_limit=30, formulation=formulation)
+            other = solve_exact(permuted(inst, 0), workers=2, time_limit=30, formulation=formulation)
+            assert base.proven and other.proven
+            assert other.makespan == pytest.approx(base.makespan)
