@@ -414,8 +414,8 @@ def make_app(view: CellView, feed: LiveFeed | None = None, *, token: str, read_o
     def refused(conn: HTTPConnection) -> str | None:
         """Why a request may not see or act on the cell (None: it may): another site's page,
         or not this dashboard's token."""
-        origin = conn.headers.get("origin")
-        if origin is not None and origin != f"http://{conn.headers.get('host', '')}":
+        origin, host = conn.headers.get("origin"), conn.headers.get("host", "")
+        if origin is not None and origin not in (f"http://{host}", f"https://{host}"):  # (https: behind a TLS proxy)
             return "refused: not from this page"
         if not _same_token(conn.headers.get(TOKEN_HEADER) or conn.query_params.get("token"), token):
             return "refused: the dashboard's token is needed (the URL printed at its start carries it)"
