@@ -21,7 +21,9 @@ Every candidate is carried out by the executor from the plan's state
 the incumbent only when shorter: the plan never gets longer, except when the world does
 (:meth:`Planner.rebase` on an event). :meth:`Planner.report` gives the plan's makespan,
 the lower bound (:func:`~lvws_ros.core.bounds.lower_bounds`, or CP-SAT's where it is
-stronger) and the gap. With ``iterations`` instead of a time limit (:meth:`Planner.run`),
+stronger) and the gap; it stops when the plan is proven optimal, or when CP-SAT has closed
+its model of the whole rest and PATIENCE rounds since gave nothing (:attr:`Planner.exhausted`).
+With ``iterations`` instead of a time limit (:meth:`Planner.run`),
 every solver call is limited by CP-SAT's deterministic time on one worker and sampling
 rounds have a fixed size: the same seed gives the same plan on every run.
 """
@@ -54,6 +56,7 @@ EXACT_FIRST = 0.25  # seconds of the first CP-SAT solve of an open-ended planner
 WORK = 1.0  # CP-SAT's deterministic time of one solve when rounds are counted, not timed
 LNS_WINDOWS = 4  # neighbourhoods of one LNS round when rounds are counted
 SAMPLE_EVERY = 3  # every this many improvement rounds, one of LVWS sampling
+PATIENCE = 8  # improvement rounds without a shorter plan after CP-SAT closed its model: the planner stops
 TEMPERATURE_TASKS = 20  # sampling_temperature: the default temperature up to this many tasks to do
 
 __all__ = ["EXACT_TASKS", "Plan", "PlanReport", "Planner", "sampling_temperature"]
@@ -95,14 +98,16 @@ class Planner:
 
     def __init__(self, model_path: str | Path | None = None, seed: int = 0, workers: int = 8,
                  exact_tasks: int = EXACT_TASKS, learned: bool = True, samples: int = DEFAULT_SAMPLES,
-                 slice_seconds: float = SLICE) -> None:
+                 slice_seconds: float = SLICE, work: float = WORK) -> None:
         self.model_path, self.seed, self.workers = model_path, seed, workers
         self.exact_tasks, self.learned, self.samples, self.slice = exact_tasks, learned, samples, slice_seconds
+        self.work = work  # CP-SAT's deterministic time of one solve when rounds are counted
         self._lvws: LVWSPolicy | None = None
         self.plan: Plan | None = None
         self.proven = False
         self.exact_closed = False  # CP-SAT proved its model's optimum from the plan's state
         self.exact_rounds = 0  # CP-SAT solves from the plan's state
+        self.unimproved = 0  # improvement rounds in a row that did not shorten the plan
         self.open_ended = False  # improving until told otherwise (a process beside a node), not to a deadline
         self.bound = self.base_bound = 0.0  # the plan's lower bound; the cell's (lower_bounds)
         self.rounds = 0
@@ -167,7 +172,7 @@ class Planner:
         were due."""
         state = state.copy()
         old = self.plan
-        self.exact_closed, self.exact_rounds = False, 0
+        self.exact_closed, self.exact_rounds, self.unimproved = False, 0, 0
         new_cell = self._instance is not state.instance
         if new_cell:
             self._instance = state.instance
@@ -217,7 +222,7 @@ class Planner:
     def improve(self, deadline: float | None = None) -> bool:
         """One improvement round within ``deadline`` (None: counted, not timed); True when
         it shortened the plan."""
-        if self.plan is None or self.proven:
+        if self.plan is None or self.exhausted:
             return False
         self.rounds += 1
         state = self.plan.state
@@ -226,11 +231,24 @@ class Planner:
             self.proven = True
             return False
         end = time.perf_counter() + self.slice if deadline is None else min(deadline, time.perf_counter() + self.slice)
-        if self.learned and self.rounds % SAMPLE_EVERY == 0 and self.lvws_seconds < self.slice:
-            return self._sample(state, todo, end)
-        if todo <= self.exact_tasks and not self.exact_closed:
-            return self._exact(state, end, deadline)
-        return self._lns(state, end)
+        if self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
+            shorter = self._sample(state, todo, end)
+        elif todo <= self.exact_tasks and not self.exact_closed:
+            shorter = self._exact(state, end, deadline)
+        else:
+            shorter = self._lns(state, end)
+        self.unimproved = 0 if shorter else self.unimproved + 1
+        return shorter
+
+    @property
+    def exhausted(self) -> bool:
+        """Nothing left worth trying from the plan's state: proven optimal, or CP-SAT proved
+        its model's optimum of the whole rest (a model that bounds the executor's only
+        without travel) and PATIENCE rounds since shortened nothing."""
+        if self.proven:
+            return True
+        small = self.plan is not None and len(self.plan.state.tasks_to_do()) <= self.exact_tasks
+        return small and self.exact_closed and self.unimproved >= PATIENCE
 
     def _exact(self, state: State, end: float, deadline: float | None) -> bool:
         from lvws_ros.policies.exact import proves_executor_bound, solve_exact
@@ -238,13 +256,18 @@ class Planner:
         assert self.plan is not None
         # the whole rest: all the time there is, or (a planner without a deadline) slices that
         # double from EXACT_FIRST, each warm-started from the plan
-        left = (deadline - time.perf_counter()) if deadline is not None and not self.open_ended \
-            else min(end - time.perf_counter(), EXACT_FIRST * 2 ** self.exact_rounds)
+        if self.counted:  # CP-SAT's deterministic time alone decides
+            left = math.inf
+        elif deadline is not None and not self.open_ended:
+            left = deadline - time.perf_counter()
+        else:
+            left = min(end - time.perf_counter(), EXACT_FIRST * 2 ** self.exact_rounds)
         self.exact_rounds += 1
         try:
-            res = solve_exact(state.instance, state=state, time_limit=max(0.05, left), hint=self.plan.schedule,
+            res = solve_exact(state.instance, state=state, time_limit=max(0.05, left) if left < math.inf else 1e9,
+                              hint=self.plan.schedule,
                               workers=1 if self.counted else self.workers, seed=self.seed + self.rounds,
-                              work=WORK if self.counted else None)
+                              work=self.work if self.counted else None)
         except ExpertError:
             return False
         if res.schedule is None:
@@ -266,6 +289,7 @@ class Planner:
             found = improve(state.instance, self.plan.schedule, state=state, workers=1,
                             time_limit=math.inf if self.counted else max(0.0, end - time.perf_counter()),
                             max_rounds=LNS_WINDOWS if self.counted else None,
+                            **({"round_limit": self.work / LNS_WINDOWS} if self.counted else {}),
                             seed=self.seed + self.rounds, bound=self.bound)
         except ExpertError:
             return False
@@ -305,7 +329,7 @@ class Planner:
         self.rebase(state, deadline)
         if on_report is not None:
             on_report(self.report())
-        while not self.proven and (iterations is None or self.rounds < iterations):
+        while not self.exhausted and (iterations is None or self.rounds < iterations):
             if deadline is not None and time.perf_counter() >= deadline - 0.05:
                 break
             assert self.plan is not None

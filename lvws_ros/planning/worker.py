@@ -78,7 +78,7 @@ def _serve(conn: Connection, options: dict[str, Any], parent: int) -> None:
         if os.getppid() != parent:
             return
         while True:  # everything that has arrived; when there is nothing to do, wait for news
-            busy = state is not None or (planner.plan is not None and not planner.proven)
+            busy = state is not None or (planner.plan is not None and not planner.exhausted)
             if not conn.poll(0 if busy else PARENT_CHECK):
                 if busy or os.getppid() != parent:
                     break

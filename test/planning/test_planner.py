@@ -147,7 +147,7 @@ def test_repair_keeps_the_orders_and_subteams_that_still_hold():
 
 
 def _heavy() -> Instance:
-    return subteam_heavy_instance(np.random.default_rng(3), 12, 70, "heavy-12r-70t")
+    return subteam_heavy_instance(np.random.default_rng(3), 10, 66, "heavy-10r-66t")
 
 
 @pytest.mark.parametrize("make", [lambda: _cells()[0], lambda: _cells()[2], _heavy])
@@ -156,9 +156,9 @@ def test_the_planner_never_hands_out_an_invalid_or_longer_plan(make):
     state = State.initial(inst)
     quick = min(simulate(inst, GreedyPayloadPolicy(priority="critical-path")).schedule.makespan,
                 simulate(inst, GreedyPayloadPolicy()).schedule.makespan)
-    planner = Planner(seed=1, workers=1, learned=False)
+    planner = Planner(seed=1, workers=1, learned=False, work=0.3)
     seen: list[float] = []
-    report = planner.run(state, iterations=6, on_report=lambda r: seen.append(r.makespan))
+    report = planner.run(state, iterations=5, on_report=lambda r: seen.append(r.makespan))
     assert planner.plan is not None
     assert check_schedule(inst, planner.plan.schedule) == []
     assert seen[0] <= quick + 1e-9 and all(b <= a + 1e-9 for a, b in itertools.pairwise(seen))
@@ -172,8 +172,8 @@ def test_with_an_iteration_limit_the_planner_is_deterministic():
     for inst in (_heavy(), _cells()[2]):
         plans = []
         for _ in range(2):
-            planner = Planner(seed=4, workers=1, samples=4)
-            planner.run(State.initial(inst), iterations=7)
+            planner = Planner(seed=4, workers=1, samples=4, work=0.2)
+            planner.run(State.initial(inst), iterations=4)
             assert planner.plan is not None
             plans.append(sorted((a.task, a.robots, round(a.start, 9)) for a in planner.plan.schedule.assignments))
         assert plans[0] == plans[1], inst.name
