@@ -109,15 +109,18 @@ def plot(runs: list[dict[str, Any]], out_png: str | Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, axes = plt.subplots(1, len(SIZES), figsize=(6 * len(SIZES), 4.2))
     for ax, (n, m) in zip(np.atleast_1d(axes), SIZES, strict=True):
         for r in (r for r in runs if r.get("n") == n and "error" not in r):
             ts = np.geomspace(0.1, r["limit"], 200)
             gaps = [(best_by(r, t) - r["bound"]) / best_by(r, t) * 100 for t in ts]
-            ax.plot(ts, gaps, label=r["family"])
+            ax.plot(ts, gaps, label=r["family"], marker="o", markevery=[len(ts) - 1], linewidth=1.8)
         ax.set(xscale="log", xlabel="planning wall time [s]", ylabel="gap to the lower bound [%]",
                title=f"{n} robots x {m} tasks")
+        ax.set_xticks([1, 5, 15, 60], labels=["1", "5", "15", "60"])
+        ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
         ax.grid(alpha=0.3)
         ax.legend()
     fig.tight_layout()

@@ -93,9 +93,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if args.policy == "lvws_sample":
         print(f"lvws_sample: seed {args.seed}", file=sys.stderr)
     if args.policy == "auto" and (report := getattr(policy, "report", None)) is not None:
-        improved = report.improved
+        improved, quick = report.improved, getattr(policy, "quick_makespan", float("nan"))
         print(f"auto: planned {report.seconds:.1f} s ({report.rounds} improvement rounds): quick plan "
-              f"{policy.quick_makespan:g}, final plan {report.makespan:g} by {report.source}, improved by CP-SAT "
+              f"{quick:g}, final plan {report.makespan:g} by {report.source}, improved by CP-SAT "
               f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)} and by "
               f"sampling {improved.get('sample', 0)} times; "
               f"{'proven optimal' if report.proven else 'not proven optimal'}; seed {args.seed}", file=sys.stderr)

@@ -282,14 +282,14 @@ class Planner:
         return shorter
 
     def _lns(self, state: State, end: float) -> bool:
-        from lvws_ros.policies.lns import improve
+        from lvws_ros.policies.lns import ROUND_LIMIT, improve
 
         assert self.plan is not None
         try:
             found = improve(state.instance, self.plan.schedule, state=state, workers=1,
                             time_limit=math.inf if self.counted else max(0.0, end - time.perf_counter()),
                             max_rounds=LNS_WINDOWS if self.counted else None,
-                            **({"round_limit": self.work / LNS_WINDOWS} if self.counted else {}),
+                            round_limit=self.work / LNS_WINDOWS if self.counted else ROUND_LIMIT,
                             seed=self.seed + self.rounds, bound=self.bound)
         except ExpertError:
             return False
