@@ -14,7 +14,8 @@ Two ways to run it:
   its plan from there and goes on improving it. Before the first plan of a cell has arrived,
   a decision waits for it at most ``first_wait`` seconds, then is GRP's (the process is
 started with the policy, a node's configure, so that its imports and the model's loading
-are done by then). If the planner's
+are done by then; should they not be, the first decision waits for them at most
+READY_WAIT seconds more). If the planner's
   process dies, the decision is GRP's, a notice says so (the node puts it on
   ``diagnostics`` as a WARN) and the process is started again.
 
@@ -38,6 +39,7 @@ from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 DEFAULT_TIME_LIMIT = 60.0  # seconds of planning offline
 FIRST_WAIT = 1.0  # seconds a decision waits for the first plan of a cell from the planner's process
+READY_WAIT = 3.0  # seconds the first decision waits, at most, for that process to have started (a loaded machine)
 
 __all__ = ["DEFAULT_TIME_LIMIT", "FIRST_WAIT", "PlannedAutoPolicy"]
 
@@ -97,7 +99,11 @@ class PlannedAutoPolicy:
         return self.follower.decide(state)
 
     def _take(self, update: PlanUpdate | None) -> None:
-        if update is not None:
+        """Follow ``update`` when it was made from the newest state handed to the planner
+        (or when there is no plan yet): a plan made from an older state has not seen the
+        decisions since (the planner repairs it from the newest state and sends it again)."""
+        assert self.process is not None
+        if update is not None and (update.seq == self.process.sent or self.follower is None):
             self.follower, self.report = PlanFollower(update.schedule), update.report
             self.proven, self.improved = update.report.proven, dict(update.report.improved)
 
@@ -115,8 +121,8 @@ class PlannedAutoPolicy:
             self._cell = state.instance
             self.process.send(state)
         if self.follower is None and new_cell:  # the cell's first plan: the best within first_wait
+            self.process.wait_ready(READY_WAIT)  # started with the policy: normally long ready by now
             end = time.perf_counter() + self.first_wait
-            self.process.wait_ready(self.first_wait)
             while (left := end - time.perf_counter()) > 0 and (update := self.process.latest(left)) is not None:
                 self._take(update)
                 if update.report.proven:

@@ -11,8 +11,8 @@ reads what has arrived. The child ends when told, when the pipe closes, or when 
 is gone.
 
 Messages (pickled over a :func:`multiprocessing.Pipe`): to the child ``("cell", Instance)``,
-``("state", StatePayload)``, ``("stop",)``; to the parent ``("ready",)`` once, then
-``("plan", PlanUpdate)``. As with every ``spawn`` start, a script that starts the planner
+``("state", seq, StatePayload)``, ``("stop",)``; to the parent ``("ready",)`` once, then
+``("plan", PlanUpdate)`` (``seq``: the number of the state the plan is made from). As with every ``spawn`` start, a script that starts the planner
 must guard its own work with ``if __name__ == "__main__":`` (the child imports the parent's
 main module); the package's entry points do.
 """
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
 import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -44,9 +45,9 @@ StatePayload = tuple[float, np.ndarray, np.ndarray, np.ndarray, list[tuple[int, 
 
 @dataclass(frozen=True)
 class PlanUpdate:
-    """A plan from the child: the whole schedule from the state of decision ``step``."""
+    """A plan from the child: the whole schedule from the ``seq``-th state it was sent."""
 
-    step: int
+    seq: int
     schedule: Schedule
     report: PlanReport
 
@@ -60,31 +61,32 @@ def _state(inst: Instance, p: StatePayload) -> State:
     return State(inst, p[0], p[1], p[2], p[3], list(p[4]), p[5], p[6])
 
 
-def _serve(conn: Connection, options: dict[str, Any], parent: int) -> None:
+def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], parent: int) -> None:
     """The child's loop (module docstring)."""
     planner = Planner(**options)
     planner.open_ended = True
     if planner.learned:
         planner.lvws()  # the model loaded before the first state comes
-    conn.send(("ready",))
+    outbox.send(("ready",))
     inst: Instance | None = None
     state: State | None = None
+    seq = 0  # of the state the plan is made from
 
     def send() -> None:
         assert planner.plan is not None
-        conn.send(("plan", PlanUpdate(planner.plan.state.step, planner.plan.schedule, planner.report())))
+        outbox.send(("plan", PlanUpdate(seq, planner.plan.schedule, planner.report())))
 
     while True:
         if os.getppid() != parent:
             return
         while True:  # everything that has arrived; when there is nothing to do, wait for news
             busy = state is not None or (planner.plan is not None and not planner.exhausted)
-            if not conn.poll(0 if busy else PARENT_CHECK):
+            if not inbox.poll(0 if busy else PARENT_CHECK):
                 if busy or os.getppid() != parent:
                     break
                 continue
             try:
-                msg = conn.recv()
+                msg = inbox.recv()
             except EOFError:
                 return
             if msg[0] == "stop":
@@ -92,7 +94,7 @@ def _serve(conn: Connection, options: dict[str, Any], parent: int) -> None:
             if msg[0] == "cell":
                 inst = msg[1]
             elif msg[0] == "state" and inst is not None:
-                state = _state(inst, msg[1])
+                state, seq = _state(inst, msg[2]), msg[1]
         if state is not None:
             if planner.rebase(state, quick=False):
                 send()  # the old plan re-timed (or GRP's): at once
@@ -105,36 +107,66 @@ def _serve(conn: Connection, options: dict[str, Any], parent: int) -> None:
 
 
 class PlannerProcess:
-    """The parent's handle on the planner's child process (module docstring)."""
+    """The parent's handle on the planner's child process (module docstring). What goes to
+    the child is handed to a sender thread that keeps only the newest state (and the cell
+    it belongs to): a child busy with a long round never blocks the parent."""
 
     def __init__(self, **options: Any) -> None:
         self.options = options
         self.process: BaseProcess | None = None
-        self.conn: Connection | None = None
-        self.cell: Instance | None = None  # the cell the child has
+        self.inbox: Connection | None = None  # plans from the child
+        self.outbox: Connection | None = None  # cells and states to the child
+        self.cell: Instance | None = None  # the cell the child has (or will have)
         self.ready = False  # the child has started and said so
         self.starts = 0
+        self._pending: tuple[Instance | None, int, StatePayload] | None = None  # the newest, not sent yet
+        self.sent = 0  # states handed over (the newest one's number)
+        self._wake = threading.Condition()
+        self._sender: threading.Thread | None = None
+        self._closed = False
 
     def start(self) -> None:
         ctx = multiprocessing.get_context("spawn")
-        ours, theirs = ctx.Pipe()
-        self.process = ctx.Process(target=_serve, args=(theirs, self.options, os.getpid()), daemon=True,
-                                   name="lvws-planner")
+        to_child, into_child = ctx.Pipe(duplex=False)  # (read end, write end)
+        from_child, out_of_child = ctx.Pipe(duplex=False)
+        self.process = ctx.Process(target=_serve, args=(to_child, out_of_child, self.options, os.getpid()),
+                                   daemon=True, name="lvws-planner")
         self.process.start()
-        theirs.close()
-        self.conn, self.cell, self.ready = ours, None, False
+        to_child.close()
+        out_of_child.close()
+        self.inbox, self.outbox, self.cell, self.ready = from_child, into_child, None, False
+        self._pending, self._closed = None, False
+        self._sender = threading.Thread(target=self._send_loop, args=(into_child,), daemon=True,
+                                        name="lvws-planner-sender")
+        self._sender.start()
         self.starts += 1
+
+    def _send_loop(self, conn: Connection) -> None:
+        while True:
+            with self._wake:
+                while self._pending is None and not self._closed:
+                    self._wake.wait()
+                if self._closed:
+                    return
+                cell, seq, payload = self._pending  # type: ignore[misc]
+                self._pending = None
+            try:
+                if cell is not None:
+                    conn.send(("cell", cell))
+                conn.send(("state", seq, payload))
+            except (BrokenPipeError, ConnectionResetError, EOFError, OSError):
+                return
 
     def wait_ready(self, timeout: float) -> bool:
         """Wait at most ``timeout`` seconds for the child to have started (its imports and
         model loaded); True when it has."""
         if self.ready:
             return True
-        if self.conn is None:
+        if self.inbox is None:
             return False
         try:
-            if self.conn.poll(timeout):
-                msg = self.conn.recv()
+            if self.inbox.poll(timeout):
+                msg = self.inbox.recv()
                 self.ready = msg[0] == "ready"
         except (EOFError, OSError):
             return False
@@ -144,40 +176,49 @@ class PlannerProcess:
         return self.process is not None and self.process.is_alive()
 
     def send(self, state: State) -> bool:
-        """Hand ``state`` to the child (the cell first when it changed); False when the
-        child is gone."""
-        if self.conn is None or not self.alive():
+        """Hand ``state`` to the child (the cell first when it changed), at once: the sender
+        thread sends it, replacing a state not sent yet; False when the child is gone."""
+        if self.outbox is None or not self.alive():
             return False
-        try:
+        with self._wake:
+            cell = None
             if self.cell is not state.instance:
-                self.conn.send(("cell", state.instance))
-                self.cell = state.instance
-            self.conn.send(("state", _payload(state)))
-        except (BrokenPipeError, ConnectionResetError, EOFError, OSError):
-            return False
+                cell = self.cell = state.instance
+            elif self._pending is not None:
+                cell = self._pending[0]  # a new cell not sent yet goes with the newer state
+            self.sent += 1
+            self._pending = (cell, self.sent, _payload(state.copy()))
+            self._wake.notify()
         return True
 
     def latest(self, wait: float = 0.0) -> PlanUpdate | None:
         """The newest plan the child sent since the last call (None: none), waiting at most
         ``wait`` seconds for one."""
         out: PlanUpdate | None = None
-        if self.conn is None:
+        if self.inbox is None:
             return None
         try:
             end = time.perf_counter() + wait
-            while self.conn.poll(max(0.0, end - time.perf_counter()) if out is None else 0):
-                msg = self.conn.recv()
+            while self.inbox.poll(max(0.0, end - time.perf_counter()) if out is None else 0):
+                msg = self.inbox.recv()
                 if msg[0] == "plan":
                     out = msg[1]
+                elif msg[0] == "ready":
+                    self.ready = True
         except (EOFError, OSError):
             pass
         return out
 
     def stop(self) -> None:
-        """End the child (politely, then by force)."""
-        if self.conn is not None:
+        """End the child (politely, then by force) and the sender thread."""
+        with self._wake:
+            self._closed = True
+            self._wake.notify()
+        if self._sender is not None:
+            self._sender.join(2.0)
+        if self.outbox is not None:
             try:
-                self.conn.send(("stop",))
+                self.outbox.send(("stop",))
             except (BrokenPipeError, OSError):
                 pass
         if self.process is not None:
@@ -185,6 +226,7 @@ class PlannerProcess:
             if self.process.is_alive():
                 self.process.kill()
                 self.process.join(2.0)
-        if self.conn is not None:
-            self.conn.close()
-        self.process = self.conn = None
+        for conn in (self.inbox, self.outbox):
+            if conn is not None:
+                conn.close()
+        self.process = self.inbox = self.outbox = self._sender = None
