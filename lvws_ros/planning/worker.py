@@ -10,10 +10,11 @@ improves while nothing new arrives. The parent never waits for it: :meth:`Planne
 reads what has arrived. The child ends when told, when the pipe closes, or when its parent
 is gone.
 
-Messages (pickled over a :func:`multiprocessing.Pipe`): to the child ``("cell", Instance)``,
-``("state", seq, StatePayload)``, ``("stop",)``; to the parent ``("ready",)`` once, then
-``("plan", PlanUpdate)`` (``seq``: the number of the state the plan is made from). As with every ``spawn`` start, a script that starts the planner
-must guard its own work with ``if __name__ == "__main__":`` (the child imports the parent's
+Messages (pickled over a one-way :func:`multiprocessing.Pipe` each way): to the child
+``("cell", Instance)``, ``("state", seq, StatePayload)``, ``("stop",)``; to the parent
+``("ready",)`` once, then ``("plan", PlanUpdate)`` (``seq``: the number of the state the
+plan is made from). As with every ``spawn`` start, a script that starts the planner must
+guard its own work with ``if __name__ == "__main__":`` (the child imports the parent's
 main module); the package's entry points do.
 """
 
