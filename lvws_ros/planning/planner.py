@@ -21,8 +21,9 @@ Every candidate is carried out by the executor from the plan's state
 the incumbent only when shorter: the plan never gets longer, except when the world does
 (:meth:`Planner.rebase` on an event). :meth:`Planner.report` gives the plan's makespan,
 the lower bound (:func:`~lvws_ros.core.bounds.lower_bounds`, or CP-SAT's where it is
-stronger) and the gap; it stops when the plan is proven optimal, or when CP-SAT has closed
-its model of the whole rest and PATIENCE rounds since gave nothing (:attr:`Planner.exhausted`).
+stronger) and the gap; it stops when the plan is proven optimal, or when PATIENCE rounds
+in a row gave nothing (PATIENCE_LARGE on a rest too large for CP-SAT's whole model;
+:attr:`Planner.exhausted`), until the world departs from the plan.
 With ``iterations`` instead of a time limit (:meth:`Planner.run`),
 every solver call is limited by CP-SAT's deterministic time on one worker and sampling
 rounds have a fixed size: the same seed gives the same plan on every run.
@@ -56,7 +57,8 @@ EXACT_FIRST = 0.25  # seconds of the first CP-SAT solve of an open-ended planner
 WORK = 1.0  # CP-SAT's deterministic time of one solve when rounds are counted, not timed
 LNS_WINDOWS = 4  # neighbourhoods of one LNS round when rounds are counted
 SAMPLE_EVERY = 3  # every this many improvement rounds, one of LVWS sampling
-PATIENCE = 8  # improvement rounds without a shorter plan after CP-SAT closed its model: the planner stops
+PATIENCE = 8  # improvement rounds in a row without a shorter plan (a small rest): the planner stops
+PATIENCE_LARGE = 40  # the same for a rest too large for CP-SAT's whole model
 TEMPERATURE_TASKS = 20  # sampling_temperature: the default temperature up to this many tasks to do
 
 __all__ = ["EXACT_TASKS", "Plan", "PlanReport", "Planner", "sampling_temperature"]
@@ -172,7 +174,6 @@ class Planner:
         were due."""
         state = state.copy()
         old = self.plan
-        self.exact_closed, self.exact_rounds, self.unimproved = False, 0, 0
         new_cell = self._instance is not state.instance
         if new_cell:
             self._instance = state.instance
@@ -184,8 +185,9 @@ class Planner:
             except PolicyError:
                 pass
         due = self.plan is None or old is None or new_cell or self.plan.makespan > old.makespan + TOLERANCE
-        if due:
-            self.proven, self.bound = False, self.base_bound  # the world departed: CP-SAT's bound no longer holds
+        if due:  # the world departed from the plan: CP-SAT's bound and proofs no longer hold, the search starts over
+            self.proven, self.bound = False, self.base_bound
+            self.exact_closed, self.exact_rounds, self.unimproved = False, 0, 0
         if due and quick:
             self.quick_plans(state, deadline)
         if self.plan is None:  # nothing yet (or not even a quick plan fitted): GRP's, however long it takes
@@ -242,13 +244,14 @@ class Planner:
 
     @property
     def exhausted(self) -> bool:
-        """Nothing left worth trying from the plan's state: proven optimal, or CP-SAT proved
-        its model's optimum of the whole rest (a model that bounds the executor's only
-        without travel) and PATIENCE rounds since shortened nothing."""
-        if self.proven:
-            return True
-        small = self.plan is not None and len(self.plan.state.tasks_to_do()) <= self.exact_tasks
-        return small and self.exact_closed and self.unimproved >= PATIENCE
+        """Nothing left worth trying from the plan's state (until the world departs from
+        the plan): proven optimal, or PATIENCE rounds in a row shortened nothing (a rest
+        small enough for CP-SAT's whole model: its proofs hold only for its own model with
+        travel), PATIENCE_LARGE on a larger rest."""
+        if self.proven or self.plan is None:
+            return self.proven
+        small = len(self.plan.state.tasks_to_do()) <= self.exact_tasks
+        return self.unimproved >= (PATIENCE if small else PATIENCE_LARGE)
 
     def _exact(self, state: State, end: float, deadline: float | None) -> bool:
         from lvws_ros.policies.exact import proves_executor_bound, solve_exact
