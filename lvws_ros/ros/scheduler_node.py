@@ -46,7 +46,7 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 from rclpy.parameter import Parameter
 
 from lvws_ros.core.executor import Policy
-from lvws_ros.core.online import OnlineDecision, OnlineScheduler
+from lvws_ros.core.online import OnlineDecision, OnlineScheduler, close_policy
 from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES, make_policy
 from lvws_ros.ros import convert, topics
@@ -328,12 +328,15 @@ class SchedulerNode(LifecycleNode):
         names = {p.name for p in changes}
         values = self.values(changes)
         if names & set(RUNTIME_POLICY_PARAMETERS):
+            built: tuple[Policy, Policy | None] | None = None
             try:
-                policy, fallback = build_policies(values)
+                policy, fallback = built = build_policies(values)
                 core = self.core
                 if core is not None and core.team is not None and core.graph is not None and fallback is None:
                     policy.reset(core.pure_instance())  # no fallback: the new policy must serve this cell
             except Exception as exc:  # a model that does not load, a policy that cannot serve the cell
+                for refused in built or ():
+                    close_policy(refused)  # a planner's process started for it ends with it
                 return SetParametersResult(successful=False, reason=f"{type(exc).__name__}: {exc}")
             self.when_idle(lambda: self.core.set_policies(policy, fallback) if self.core is not None else None)
             self.policy_name, self.seed = str(values["policy"]), int(values["seed"])
