@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV := $(CURDIR)/.venv
 PY := $(VENV)/bin/python
 BUILD := $(CURDIR)/build
-MSG_SRCS := $(wildcard msg_defs/msg/*.msg) $(wildcard msg_defs/srv/*.srv) msg_defs/CMakeLists.txt msg_defs/package.xml
+MSG_SRCS := $(wildcard msg_defs/msg/*.msg) $(wildcard msg_defs/srv/*.srv) $(wildcard msg_defs/action/*.action) msg_defs/CMakeLists.txt msg_defs/package.xml
 PKG_SRCS := setup.py setup.cfg package.xml resource/lvws_ros $(wildcard config/*) \
   $(shell find lvws_ros -name '*.py' -o -name '*.pt' -o -name '*.json' 2>/dev/null)
 EXES := lvws scheduler cell_sim recorder
