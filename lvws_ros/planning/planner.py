@@ -7,14 +7,18 @@ there is time.
 1. **quick plans** from the state: GRP in critical-path order, GRP, LVWS (each a whole
    schedule; each within the deadline, in that order: the cheapest first); the shortest
    is the incumbent;
-2. **improvement rounds**, in turn: CP-SAT on the whole rest, warm-started from the
-   incumbent, while at most ``exact_tasks`` tasks are left to do (a proof of optimality
-   ends the improvement); otherwise large-neighbourhood search on the incumbent
-   (:func:`~lvws_ros.policies.lns.improve`, travel and the way home included) for a slice
-   of time; and every third round, when LVWS's quick plan fitted in a slice, a round of
-   LVWS sampling (:func:`~lvws_ros.learning.sampling.sample_schedules`) at a temperature
-   that shrinks with the tasks to do (:func:`sampling_temperature`: a hot sample of 500
-   tasks is worse than LVWS's own).
+2. **improvement rounds**, in turn: while at most ``exact_tasks`` tasks are left to do,
+   CP-SAT on the whole rest, warm-started from the incumbent, in slices that double from
+   EXACT_FIRST (a proof of optimality ends the improvement), every other round; the other
+   rounds, and every round on a larger rest, large-neighbourhood search on the incumbent
+   (:func:`~lvws_ros.policies.lns.improve`, travel and the way home included; its window
+   adapts to what CP-SAT proves in a round's time and is kept from round to round) for a
+   slice of time (a whole model of a few tens of tasks and robots with travel can be too
+   large for CP-SAT to shorten anything, where its neighbourhoods still do); and every
+   third round, when LVWS's quick plan fitted in a slice, a round of LVWS sampling
+   (:func:`~lvws_ros.learning.sampling.sample_schedules`) at a temperature that shrinks
+   with the tasks to do (:func:`sampling_temperature`: a hot sample of 500 tasks is worse
+   than LVWS's own).
 
 Every candidate is carried out by the executor from the plan's state
 (:func:`~lvws_ros.planning.follow.repair`, Eqs. 8-11 checked at every step) and replaces
@@ -109,7 +113,9 @@ class Planner:
         self.proven = False
         self.exact_closed = False  # CP-SAT proved its model's optimum from the plan's state
         self.exact_rounds = 0  # CP-SAT solves from the plan's state
+        self.lns_rounds = 0  # LNS rounds from the plan's state
         self.unimproved = 0  # improvement rounds in a row that did not shorten the plan
+        self.lns_window: int | None = None  # the neighbourhood size LNS adapted to last (None: its default)
         self.open_ended = False  # improving until told otherwise (a process beside a node), not to a deadline
         self.bound = self.base_bound = 0.0  # the plan's lower bound; the cell's (lower_bounds)
         self.rounds = 0
@@ -178,6 +184,7 @@ class Planner:
         if new_cell:
             self._instance = state.instance
             self.base_bound = lower_bounds(state.instance).best
+            self.lns_window = None
         self.plan = None
         if old is not None:
             try:
@@ -187,7 +194,7 @@ class Planner:
         due = self.plan is None or old is None or new_cell or self.plan.makespan > old.makespan + TOLERANCE
         if due:  # the world departed from the plan: CP-SAT's bound and proofs no longer hold, the search starts over
             self.proven, self.bound = False, self.base_bound
-            self.exact_closed, self.exact_rounds, self.unimproved = False, 0, 0
+            self.exact_closed, self.exact_rounds, self.lns_rounds, self.unimproved = False, 0, 0, 0
         if due and quick:
             self.quick_plans(state, deadline)
         if self.plan is None:  # nothing yet (or not even a quick plan fitted): GRP's, however long it takes
@@ -235,9 +242,10 @@ class Planner:
         end = time.perf_counter() + self.slice if deadline is None else min(deadline, time.perf_counter() + self.slice)
         if self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
             shorter = self._sample(state, todo, end)
-        elif todo <= self.exact_tasks and not self.exact_closed:
+        elif todo <= self.exact_tasks and not self.exact_closed and self.exact_rounds <= self.lns_rounds:
             shorter = self._exact(state, end, deadline)
-        else:
+        else:  # a larger rest, or every other round on a small one (CP-SAT's whole model may find nothing there)
+            self.lns_rounds += 1
             shorter = self._lns(state, end)
         self.unimproved = 0 if shorter else self.unimproved + 1
         return shorter
@@ -257,12 +265,12 @@ class Planner:
         from lvws_ros.policies.exact import proves_executor_bound, solve_exact
 
         assert self.plan is not None
-        # the whole rest: all the time there is, or (a planner without a deadline) slices that
-        # double from EXACT_FIRST, each warm-started from the plan
+        # the whole rest, in slices that double from EXACT_FIRST (rounds of LNS between them), each
+        # warm-started from the plan: up to the deadline, or (a planner without one) up to a round's end
         if self.counted:  # CP-SAT's deterministic time alone decides
             left = math.inf
         elif deadline is not None and not self.open_ended:
-            left = deadline - time.perf_counter()
+            left = min(deadline - time.perf_counter(), EXACT_FIRST * 2 ** self.exact_rounds)
         else:
             left = min(end - time.perf_counter(), EXACT_FIRST * 2 ** self.exact_rounds)
         self.exact_rounds += 1
@@ -293,9 +301,10 @@ class Planner:
                             time_limit=math.inf if self.counted else max(0.0, end - time.perf_counter()),
                             max_rounds=LNS_WINDOWS if self.counted else None,
                             round_limit=self.work / LNS_WINDOWS if self.counted else ROUND_LIMIT,
-                            seed=self.seed + self.rounds, bound=self.bound)
+                            seed=self.seed + self.rounds, bound=self.bound, window=self.lns_window)
         except ExpertError:
             return False
+        self.lns_window = found.window
         return bool(found.improved) and self.offer_schedule(found.schedule, "lns")
 
     def _sample(self, state: State, todo: int, end: float) -> bool:

@@ -48,7 +48,7 @@ large-neighbourhood search built on it) are the only ones that import OR-Tools.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -200,6 +200,10 @@ class _Horizon:
     def ticks(self, x: float) -> int:
         return round(x * self.scale)
 
+    def up(self, seconds: float) -> int:
+        """Travel in ticks, rounded up (a schedule of the model is valid in real time)."""
+        return int(np.ceil(seconds * self.scale - 1e-9))
+
 
 def _travel_times(inst: Instance, state: State) -> np.ndarray:
     """The travel times a schedule from ``state`` can use (empty without travel): from
@@ -240,10 +244,7 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
     if tr is None or state.robot_site is None:
         return None
     site = state.robot_site
-
-    def up(seconds: float) -> int:
-        return int(np.ceil(seconds * h.scale - 1e-9))
-
+    up = h.up
     now = h.ticks(state.time)
     depart = {j: model.new_int_var(now, h.upper, f"D_{j}") for j in h.todo}
     for j in h.todo:
@@ -293,20 +294,40 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
     return out
 
 
-def _hint_travel(inst: Instance, state: State, model: cp_model.CpModel, tv: _TravelVars, sched: Schedule,
-                 teams: dict[int, set[int]], ticks: Callable[[float], int]) -> None:
-    """Hint the travel model with ``sched`` (left-shifted from ``state``) and the subteams
-    hinted for its tasks (``teams``): each task's departure, and each robot's circuit
-    through its tasks in the model in the order it does them there."""
+def _hint_travel(inst: Instance, state: State, model: cp_model.CpModel, tv: _TravelVars, h: _Horizon,
+                 start: dict[int, Any], sched: Schedule, teams: dict[int, set[int]]) -> None:
+    """Hint the travel model with ``sched``'s subteams (``teams``) and per-robot orders,
+    timed on the model's own ticks: a forward pass in ``sched``'s order of starts, each
+    task setting out once it is ready and its members are free and starting when the last
+    one is there, travel rounded up as the model rounds it. The hint is then a solution of
+    the model; starts rounded from real times are not always one (a start a tick before its
+    last member arrives), and CP-SAT then spends a neighbourhood's time repairing the hint."""
+    tr = inst.travel
+    assert tr is not None and state.robot_site is not None
     by_task = sched.by_task()
-    leave = departures(inst, sched, state)
-    for j, d in tv.depart.items():
-        if inst.tasks[j].id in leave:
-            model.add_hint(d, ticks(leave[inst.tasks[j].id]))
+    order = sorted((j for j in h.todo if inst.tasks[j].id in by_task),
+                   key=lambda j: (by_task[inst.tasks[j].id].start, j))
+    now = h.ticks(state.time)
+    free, prev = list(h.free_at), [-1] * inst.num_robots
+    end: dict[int, int] = {}
+    for j in order:
+        members = sorted(teams.get(j, ()))
+        ready = [end[p] if p in end else h.ticks(h.fixed_end.get(p, state.time)) for p in inst.prerequisites[j]]
+        depart = max([now, *ready, *(free[r] for r in members)])
+        at = [depart + h.up(tr.arrival([r], [int(state.robot_site[r])], j) if prev[r] < 0
+                            else tr.time(r, tr.task_to[prev[r]], tr.task_from[j])) for r in members]
+        begin = max([depart, model.proto.variables[start[j].index].domain[0], *at])
+        end[j] = begin + h.dur[j]
+        model.add_hint(start[j], begin)
+        if j in tv.depart:
+            model.add_hint(tv.depart[j], depart)
+        for r in members:
+            free[r], prev[r] = end[j], j
     for r, named in tv.arcs.items():
         mine = [j for a, j in named if a is None and j is not None]  # the tasks in the robot's circuit
-        order = sorted((j for j in mine if r in teams.get(j, ())), key=lambda j: (by_task[inst.tasks[j].id].start, j))
-        used = set(zip([None, *order], [*order, None], strict=True)) if order else {(None, None)}
+        robot_order = sorted((j for j in mine if r in teams.get(j, ())),
+                             key=lambda j: (by_task[inst.tasks[j].id].start, j))
+        used = set(zip([None, *robot_order], [*robot_order, None], strict=True)) if robot_order else {(None, None)}
         for pair, lit in named.items():
             model.add_hint(lit, pair in used)
 
@@ -515,16 +536,18 @@ def _build_boolean_model(inst: Instance, h: _Horizon) -> _Model:
     return _Model(model, start, member, None, makespan)
 
 
-def _add_hint(inst: Instance, h: _Horizon, m: _Model, hint: Schedule) -> dict[int, set[int]]:
+def _add_hint(inst: Instance, h: _Horizon, m: _Model, hint: Schedule, starts: bool = True) -> dict[int, set[int]]:
     """Hint: the left-shifted heuristic schedule, each subteam cut down to a minimal one
-    (coalition model); the subteams hinted."""
+    (coalition model); the subteams hinted. ``starts``: the starts too (with travel,
+    :func:`_hint_travel` times them on the model's ticks instead)."""
     by_task = hint.by_task()
     teams: dict[int, set[int]] = {}
     for j in h.todo:
         a = by_task.get(inst.tasks[j].id)
         if a is None:
             continue
-        m.model.add_hint(m.start[j], min(max(h.ticks(a.start), h.head[j]), h.upper - h.tail[j]))
+        if starts:
+            m.model.add_hint(m.start[j], min(max(h.ticks(a.start), h.head[j]), h.upper - h.tail[j]))
         robots = {inst.robot_index[r] for r in a.robots}
         if h.teams is not None and m.choice is not None:
             pick = next((k for k, team in enumerate(h.teams[j]) if set(team) <= robots), 0)
@@ -757,9 +780,9 @@ def solve_exact(
     else:
         m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
         tv = _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
-        teams = _add_hint(inst, h, m, hint)
+        teams = _add_hint(inst, h, m, hint, starts=tv is None)
         if tv is not None:
-            _hint_travel(inst, state, m.model, tv, hint, teams, h.ticks)
+            _hint_travel(inst, state, m.model, tv, h, m.start, hint, teams)
         model, name = m.model, "coalition" if h.teams is not None else "boolean"
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))

@@ -77,6 +77,8 @@ DEFAULT_WINDOW_POOLS = 48  # the same over pools (chosen on PSPLIB j1202_1, j120
 ROUND_LIMIT = 0.5  # seconds CP-SAT may take for one neighbourhood
 LATER = 2  # tasks after the window in the model (shifted, not re-planned), in windows
 LATER_TRAVEL = 1  # the same with travel
+MIN_WINDOW = 2  # the adaptive window never holds fewer tasks
+NOT_RUN, OPEN, CLOSED = 0, 1, 2  # a neighbourhood: no time left to solve it; solved, not proven; proven optimal
 
 __all__ = ["DEFAULT_WINDOW", "DEFAULT_WINDOW_POOLS", "DEFAULT_WINDOW_TRAVEL", "LNSResult", "improve"]
 
@@ -88,6 +90,7 @@ class LNSResult:
     improved: int  # of them that shortened the schedule (or kept it and ended its tasks earlier)
     start_makespan: float
     seconds: float
+    window: int = DEFAULT_WINDOW  # the window of the last neighbourhood (adapted: see improve)
 
 
 def _score(s: Schedule) -> tuple[float, float]:
@@ -128,7 +131,7 @@ def _prefix(inst: Instance, state: State, inc: Schedule, prefix: list[int], free
 
 def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int], window: list[int],
                   later: list[int], scale: int, solve_by: float, workers: int,
-                  seed: int, work: float | None = None) -> tuple[Schedule | None, bool]:
+                  seed: int, work: float | None = None) -> tuple[Schedule | None, int]:
     """One neighbourhood: the window's subteams and starts free, the later tasks' subteams
     and per-robot orders fixed, the prefix as it is (tasks after ``later`` are not in the
     model: the left shift places them); the left-shifted solution (None: none found by
@@ -177,21 +180,23 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
             members[j] = {r: model.new_constant(1) for r in incumbent_team[j]}
         tv = _add_travel(model, inst, after, h, start, members, makespan)
         if tv is not None:
-            _hint_travel(inst, state, model, tv, inc, {j: set(incumbent_team[j]) for j in todo}, h.ticks)
+            _hint_travel(inst, after, model, tv, h, start, inc, {j: set(incumbent_team[j]) for j in todo})
     for intervals in per_robot:
         if len(intervals) > 1:
             model.add_no_overlap(intervals)
     weight = len(free) * (upper + 1) + 1
     model.minimize(weight * makespan + sum(end.values()))
     model.add_hint(makespan, upper)
-    for j in free:  # the incumbent, on the tick scale, as the hint
-        model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
+    if inst.travel is None:  # the incumbent, on the tick scale, as the hint (with travel: timed by _hint_travel)
+        for j in free:
+            model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
     solver = _solver(solve_by, work, workers, seed)
     if solver is None:
-        return None, False
+        return None, NOT_RUN
     status = solver.solve(model)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        return None, True
+        return None, CLOSED if status == cp_model.INFEASIBLE else OPEN
+    closed = CLOSED if status == cp_model.OPTIMAL else OPEN
     out = _outside(inst, inc, prefix, free, {j: solver.value(start[j]) / scale for j in free})
     for j in free:
         t = inst.tasks[j]
@@ -207,7 +212,7 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
             robots = by_task[t.id].robots
         s0 = solver.value(start[j]) / scale
         out.append(Assignment(t.id, robots, s0, s0 + t.duration))
-    return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), True
+    return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), closed
 
 
 def _solver(solve_by: float, work: float | None, workers: int, seed: int) -> cp_model.CpSolver | None:
@@ -240,7 +245,7 @@ def _outside(inst: Instance, inc: Schedule, prefix: list[int], free: set[int],
 
 def _pool_window_model(inst: Instance, state: State, inc: Schedule, found: tuple[Pool, ...], prefix: list[int],
                        window: list[int], later: list[int], scale: int, solve_by: float, workers: int,
-                       seed: int, work: float | None = None) -> tuple[Schedule | None, bool]:
+                       seed: int, work: float | None = None) -> tuple[Schedule | None, int]:
     """One neighbourhood over pools of interchangeable robots (no travel): the window's
     tasks choose a count per pool (the exact expert's pool model) and their starts; the
     later tasks keep their counts per pool and move; per pool one cumulative, each robot
@@ -279,9 +284,11 @@ def _pool_window_model(inst: Instance, state: State, inc: Schedule, found: tuple
     model.minimize((len(free) * (upper + 1) + 1) * makespan + sum(end.values()))  # the makespan, then the ends
     solver = _solver(solve_by, work, workers, seed)
     if solver is None:
-        return None, False
-    if solver.solve(model) not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        return None, True
+        return None, NOT_RUN
+    status = solver.solve(model)
+    if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        return None, CLOSED if status == cp_model.INFEASIBLE else OPEN
+    closed = CLOSED if status == cp_model.OPTIMAL else OPEN
     teams: dict[int, list[int]] = {j: [] for j in free}
     for p, pool in enumerate(found):
         tasks = [j for j in free if int(solver.value(count[j][p]) if p in count[j] else 0) > 0]
@@ -298,13 +305,13 @@ def _pool_window_model(inst: Instance, state: State, inc: Schedule, found: tuple
         team = prune(teams[j], inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload, roles=roles)
         s0 = solver.value(start[j]) / scale
         out.append(Assignment(t.id, tuple(inst.robots[r].id for r in sorted(team)), s0, s0 + t.duration))
-    return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), True
+    return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), closed
 
 
 def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,
             window: int | None = None, workers: int = 1, seed: int = 0,
             round_limit: float = ROUND_LIMIT, bound: float | None = None,
-            max_rounds: int | None = None) -> LNSResult:
+            max_rounds: int | None = None, adaptive: bool = True) -> LNSResult:
     """Improve ``incumbent`` (a valid schedule of ``inst``, from ``state`` when given) by
     large-neighbourhood search within ``time_limit`` seconds (module docstring). Never
     returns a schedule longer than the incumbent; the same seed gives the same windows.
@@ -312,7 +319,11 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     schedule reaches it (optimal). ``window``: tasks per neighbourhood (None: DEFAULT_WINDOW,
     DEFAULT_WINDOW_TRAVEL with travel, DEFAULT_WINDOW_POOLS over pools). ``max_rounds``: at most this many neighbourhoods,
     each solved within ``round_limit`` of CP-SAT's deterministic time (not wall time) on
-    ``workers`` = 1: the same result on every run and machine (``time_limit`` still holds)."""
+    ``workers`` = 1: the same result on every run and machine (``time_limit`` still holds).
+    ``adaptive``: the window grows by a task after a neighbourhood CP-SAT proved within its
+    round and shrinks by one (to MIN_WINDOW) after one it could not, up to twice its first
+    size: the neighbourhoods fit the round's time whatever the team's size (with travel, the
+    model grows with robots x tasks squared). The last window is in the result."""
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state
     best = left_shift(inst, incumbent, state)
@@ -324,6 +335,8 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         window = DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if inst.travel is None else DEFAULT_WINDOW_TRAVEL
     if window < 1:
         raise ExpertError(f"lns: the window must hold at least one task, got {window}")
+    window_cap = max(window, 2 * (DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if inst.travel is None
+                                  else DEFAULT_WINDOW_TRAVEL))
     scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
     later_windows = LATER if inst.travel is None else LATER_TRAVEL
     rng = np.random.default_rng(seed)
@@ -364,7 +377,9 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         else:
             cand, solved = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers,
                                          seed + rounds, work)
-        rounds += solved
+        rounds += solved != NOT_RUN
+        if adaptive and solved != NOT_RUN:  # a proven neighbourhood: try a larger one; an open one: a smaller one
+            window = min(window_cap, window + 1) if solved == CLOSED else max(MIN_WINDOW, window - 1)
 
         if cand is not None and _better(_score(cand), _score(best)):
             if check_schedule(inst, cand):
@@ -376,4 +391,4 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         if whole:
             break
     best.policy = incumbent.policy
-    return LNSResult(best, rounds, improved, first, time.perf_counter() - t_start)
+    return LNSResult(best, rounds, improved, first, time.perf_counter() - t_start, window)

@@ -10,16 +10,17 @@ import time
 
 import numpy as np
 import pytest
+from ortools.sat.python import cp_model
 
 from lvws_ros.core.datasets import subteam_heavy_instance
-from lvws_ros.core.executor import simulate
+from lvws_ros.core.executor import State, simulate
 from lvws_ros.core.families import family_instance
-from lvws_ros.core.formats import load_schedule, save_schedule
+from lvws_ros.core.formats import instance_from_dict, load_schedule, save_schedule
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.errors import ExpertError
 from lvws_ros.learning.auto import AutoPolicy
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomPolicy
-from lvws_ros.policies.exact import _time_scale, _travel_times, left_shift
+from lvws_ros.policies.exact import _time_scale, _travel_times, left_shift, solve_exact
 from lvws_ros.policies.lns import _window_model, improve
 
 
@@ -126,3 +127,58 @@ def test_a_late_window_with_the_way_home_holds_its_incumbent(index):
     cand, solved = _window_model(inst, state, inc, started, rest, [], scale, time.perf_counter() + 5.0, 1, 0)
     assert solved and cand is not None
     assert check_schedule(inst, cand) == [] and cand.makespan <= inc.makespan + 1e-9
+
+
+class _HeldToTheHint(cp_model.CpSolver):
+    """CP-SAT with every hinted variable fixed to its hint: it finds a solution exactly
+    when the hint is one."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.parameters.fix_variables_to_their_hinted_value = True
+
+
+def _coalition_cell(robots: int = 20, tasks: int = 30, seed: int = 4):
+    """Interchangeable robots at one depot, tasks at random points each needing 1-5 of
+    them, the way home counted (the shape of public coalition benchmarks)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.random((tasks + 1, 2))
+    doc = {"format": "lvws-instance/1", "name": f"coalitions-{robots}r-{tasks}t", "traits": ["unit"],
+           "objective": "return", "sites": {f"s{k}": xy[k].tolist() for k in range(tasks + 1)},
+           "robots": [{"id": f"a{r}", "traits": {"unit": 1}, "site": f"s{tasks}", "speed": 0.2}
+                      for r in range(robots)],
+           "tasks": [{"id": f"t{k}", "requires": {"unit": int(rng.integers(1, 6))}, "duration": 5.0, "after": [],
+                      "site": f"s{k}"} for k in range(tasks)]}
+    return instance_from_dict(doc)
+
+
+@pytest.mark.parametrize("family", ["coalitions", "depot", "traits-return"])
+def test_the_travel_hint_is_a_solution_of_the_window_and_whole_models(monkeypatch, family):
+    # The incumbent timed on the model's ticks (travel rounded up): a hint rounded from real
+    # times can start a task a tick before its last member is there, and CP-SAT then spends
+    # a neighbourhood's time repairing it (with 20 robots, every neighbourhood of 0.5 s).
+    inst = _coalition_cell() if family == "coalitions" else family_instance(family, 5, seed=2, num_robots=12,
+                                                                             num_tasks=30)
+    state = State.initial(inst)
+    inc = left_shift(inst, simulate(inst, GreedyPayloadPolicy()).schedule, state)
+    rest = sorted(range(inst.num_tasks), key=lambda j: (inc.by_task()[inst.tasks[j].id].start, j))
+    scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
+    monkeypatch.setattr(cp_model, "CpSolver", _HeldToTheHint)
+    for first in (0, 8, 20):
+        cand, _ = _window_model(inst, state, inc, rest[:first], rest[first:first + 6], rest[first + 6:first + 12],
+                                scale, time.perf_counter() + 10.0, 1, 0)
+        assert cand is not None and check_schedule(inst, cand) == [], first
+    res = solve_exact(inst, hint=inc, time_limit=10.0, workers=1)
+    assert res.schedule is not None and check_schedule(inst, res.schedule) == []
+
+
+def test_the_window_adapts_to_what_cp_sat_proves_in_a_round():
+    # Twenty interchangeable robots with travel and the way home: a window of six tasks is
+    # more than CP-SAT closes in a round; the window shrinks until it does, and the result is
+    # no longer than the fixed window's.
+    inst = _coalition_cell()
+    inc = simulate(inst, GreedyPayloadPolicy()).schedule
+    fixed = improve(inst, inc, max_rounds=12, round_limit=0.05, adaptive=False)
+    adapted = improve(inst, inc, max_rounds=12, round_limit=0.05)
+    assert adapted.window < fixed.window
+    assert check_schedule(inst, adapted.schedule) == [] and adapted.schedule.makespan <= fixed.schedule.makespan
