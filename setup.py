@@ -36,6 +36,7 @@ setup(
             "scheduler = lvws_ros.ros.scheduler_node:main",
             "cell_sim = lvws_ros.ros.cell_sim_node:main",
             "recorder = lvws_ros.ros.recorder:main",
+            "fake_robots = lvws_ros.robot.fake:main",
         ],
     },
 )

@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from lvws_ros import __version__
-from lvws_ros.cli import offline, runtime
+from lvws_ros.cli import offline, robots, runtime
 from lvws_ros.errors import LvwsError
 
 
@@ -33,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     offline.add_parsers(add)
     runtime.add_parsers(add)
+    robots.add_parsers(add)
     return parser
 
 
