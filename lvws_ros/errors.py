@@ -13,6 +13,7 @@ __all__ = [
     "AssignmentRejected",
     "BagError",
     "ConfigError",
+    "DispatchRefused",
     "ExpertError",
     "InstanceError",
     "LaunchError",
@@ -59,6 +60,10 @@ class AssignmentRejected(LvwsError):
 
 class WorldEventRejected(LvwsError):
     """The simulated world cannot take an event: a task to add, cancel, a robot to fail or repair."""
+
+
+class DispatchRefused(LvwsError):
+    """The dispatcher cannot carry out an assignment or a service call (the message names the item)."""
 
 
 class WorldStuck(LvwsError):

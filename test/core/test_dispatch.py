@@ -1,0 +1,111 @@
+"""The dispatcher's bookkeeping: tasks, subteam goals and the failure rules, without ROS."""
+
+from __future__ import annotations
+
+import pytest
+
+from lvws_ros.core.dispatch import Dispatch, GoalKind
+from lvws_ros.core.executor import TaskStatus
+from lvws_ros.core.formats import instance_from_dict
+from lvws_ros.errors import DispatchRefused
+
+CELL = {
+    "format": "lvws-instance/1", "name": "two-sites", "capabilities": ["lift", "weld"],
+    "sites": {"a": [0, 0], "b": [4, 3]},
+    "robots": [{"id": "r1", "capabilities": [1, 0], "payload": 2, "site": "a", "speed": 1.0},
+               {"id": "r2", "capabilities": [1, 0], "payload": 2, "site": "a", "speed": 0.5},
+               {"id": "arm", "capabilities": [0, 1], "payload": 1, "site": "b"}],
+    "tasks": [{"id": "carry", "capabilities": [1, 0], "payload": 3, "duration": 2, "after": [], "from": "a", "to": "b"},
+              {"id": "weld", "capabilities": [0, 1], "payload": 0, "duration": 3, "after": ["carry"], "site": "b"}],
+}
+
+
+def status(d: Dispatch, task: str) -> int:
+    return next(t.status for t in d.graph_snapshot(0.0).tasks if t.id == task)
+
+
+def test_a_subteam_task_is_done_when_every_member_succeeded_and_leaves_them_at_its_end_site():
+    d = Dispatch(instance_from_dict(CELL))
+    assert status(d, "carry") == TaskStatus.READY and status(d, "weld") == TaskStatus.QUEUED
+    goals, out = d.assign("carry", ["r1", "r2"], 10.0)
+    assert [g.robot for g in goals] == ["r1", "r2"] and out.changed
+    assert goals[0].site == "a" and goals[0].site_to == "b" and goals[0].planned_start == 10.0
+    assert status(d, "carry") == TaskStatus.ASSIGNED
+    team = {r.id: r for r in d.team_snapshot(11.0).robots}
+    assert not team["r1"].available and team["r1"].current_task == "carry" and team["r1"].site == "b"
+    assert team["r1"].busy_for == pytest.approx(1.0)
+    d.accepted(goals[0].key, 10.1)
+    d.feedback(goals[0].key, 12.0, "working", 0.5, "a")
+    d.feedback(goals[1].key, 13.0, "working", 0.5, "a")
+    d.succeeded(goals[0].key, 15.0, 2.0)
+    assert status(d, "carry") == TaskStatus.ASSIGNED  # r2 is still at it
+    assert d.busy_with("r1") == "carry"  # a member stays with the task until it is done
+    d.succeeded(goals[1].key, 16.0, 2.0)
+    task = next(t for t in d.graph_snapshot(16.0).tasks if t.id == "carry")
+    assert task.status == TaskStatus.DONE and task.start == 13.0 and task.end == 16.0
+    assert status(d, "weld") == TaskStatus.READY
+    team = {r.id: r for r in d.team_snapshot(16.0).robots}
+    assert team["r1"].available and team["r1"].site == "b" and team["arm"].site == "b"
+
+
+def test_a_member_that_aborts_fails_the_task_the_others_are_cancelled_and_it_leaves_until_it_rejoins():
+    d = Dispatch(instance_from_dict(CELL))
+    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    d.feedback(goals[1].key, 1.0, "travelling", 0.1, "")
+    out = d.ended(goals[0].key, 2.0, GoalKind.ABORTED, "gripper jammed")
+    assert out.cancel == [goals[1].key] and out.changed
+    assert [n.kind for n in out.news] == [GoalKind.ABORTED]
+    assert status(d, "carry") == TaskStatus.READY
+    team = {r.id: r for r in d.team_snapshot(2.0).robots}
+    assert "r1" not in team  # it vanishes from TeamState
+    assert not team["r2"].available and team["r2"].site == ""  # until its goal ends, between sites
+    with pytest.raises(DispatchRefused, match="r2.*busy"):
+        d.assign("carry", ["r2"], 2.5)
+    d.ended(goals[1].key, 3.0, GoalKind.CANCELED, "")
+    assert d.team_snapshot(3.0).robots[0].available  # r2, cancelled on request, stays in the team
+    late = d.succeeded(goals[0].key, 3.5, 2.0)  # a result for a goal already over
+    assert not late.changed and "already aborted" in late.notes[0]
+    d.rejoin("r1")
+    assert {r.id for r in d.team_snapshot(4.0).robots} == {"r1", "r2", "arm"}
+
+
+def test_a_silent_goal_is_lost_and_a_free_robot_whose_server_is_gone_leaves():
+    d = Dispatch(instance_from_dict(CELL))
+    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    d.feedback(goals[0].key, 4.0, "travelling", 0.2, "")
+    out = d.silent(5.5, 5.0, {})
+    assert out.cancel == [goals[0].key] and [n.kind for n in out.news] == [GoalKind.LOST]
+    assert d.failed_robots() == {"r2": ("lost", 5.5)}
+    out = d.silent(6.0, 5.0, {"arm": False})
+    assert "arm" in d.failed_robots() and out.changed
+    assert d.feedback(goals[1].key, 6.0, "working", 0.5, "a").notes  # a stale goal's feedback: a note, no change
+
+
+def test_bad_assignments_and_service_calls_are_refused_naming_the_item():
+    d = Dispatch(instance_from_dict(CELL), present=["r1", "r2"])
+    for task, team, match in (("nope", ["r1"], "unknown task 'nope'"), ("carry", ["ghost"], "unknown robot 'ghost'"),
+                              ("weld", ["arm"], "'weld' is QUEUED"), ("carry", ["r1", "r1"], "twice")):
+        with pytest.raises(DispatchRefused, match=match):
+            d.assign(task, team, 0.0)
+    with pytest.raises(DispatchRefused, match="'arm' is out"):
+        d.assign("carry", ["arm"], 0.0)
+    with pytest.raises(DispatchRefused, match="unknown trait|unknown task id|unknown site"):
+        d.add_tasks([{"id": "x", "capabilities": [1, 0], "payload": 0, "duration": 1, "after": ["nope"], "site": "a"}])
+    with pytest.raises(DispatchRefused, match="unknown site 'c'"):
+        d.add_tasks([{"id": "x", "capabilities": [1, 0], "payload": 0, "duration": 1, "after": [], "site": "c"}])
+    with pytest.raises(DispatchRefused, match="cancel: unknown task"):
+        d.cancel("nope", 0.0)
+
+
+def test_submitted_and_cancelled_tasks_change_the_graph_and_a_cancel_stops_the_running_goals():
+    d = Dispatch(instance_from_dict(CELL))
+    d.add_tasks([{"id": "polish", "capabilities": [0, 1], "payload": 0, "duration": 1, "after": ["weld"],
+                  "site": "b"}])
+    assert status(d, "polish") == TaskStatus.QUEUED
+    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    out = d.cancel("carry", 1.0)
+    assert sorted(out.cancel) == sorted(g.key for g in goals)
+    assert [t.id for t in d.graph_snapshot(1.0).tasks] == ["weld", "polish"]
+    assert status(d, "weld") == TaskStatus.READY  # no longer waits for the cancelled task
+    d.ended(goals[0].key, 1.5, GoalKind.CANCELED, "")
+    assert "r1" in {r.id for r in d.team_snapshot(1.5).robots if r.available}
