@@ -257,8 +257,11 @@ class TaskServer(Node):
 
     def _end(self, goal_handle: ServerGoalHandle, how: str, result: Any) -> Any:
         task = goal_handle.request.task_id
-        (self.get_logger().info if how == "succeed" else self.get_logger().warning)(
-            f"{self.robot_id}: task {task!r}: {how} ({result.message}; {result.duration:.2f} s of work)")
+        line = f"{self.robot_id}: task {task!r}: {how} ({result.message}; {result.duration:.2f} s of work)"
+        if how == "succeed":  # one severity per call site: rclpy's loggers insist
+            self.get_logger().info(line)
+        else:
+            self.get_logger().warning(line)
         try:
             getattr(goal_handle, how)()
         except Exception as exc:  # a goal already ended, or a context shut down under us
