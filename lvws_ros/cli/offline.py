@@ -125,6 +125,28 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _import_dcmrta(folder: Path, name: str | None) -> Instance:
+    """One instance of the DCMRTA / CTAS-D test sets: its four YAML files, read with
+    PyYAML's safe loader (plain data, nothing in them runs)."""
+    import yaml
+
+    from lvws_ros.core.importers import dcmrta_instance
+
+    docs: dict[str, Any] = {}
+    for part in ("graph", "task_param", "vehicle_param", "planner_param"):
+        path = folder / f"{part}.yaml"
+        try:
+            docs[part] = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise InstanceError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+        except yaml.YAMLError as exc:
+            raise InstanceError(f"{path}: not YAML ({str(exc).splitlines()[0]})") from None
+        if not isinstance(docs[part], dict):
+            raise InstanceError(f"{path}: expected a mapping at the top")
+    return dcmrta_instance(docs["graph"], docs["task_param"], docs["vehicle_param"], docs["planner_param"],
+                           name or folder.name, str(folder))
+
+
 def cmd_import(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -132,9 +154,14 @@ def cmd_import(args: argparse.Namespace) -> int:
 
     wanted = 2 if args.kind == "csv" else 1
     if len(args.files) != wanted:
-        usage = {"mspsp": "FILE.dzn", "psplib": "FILE.sm or FILE.rcp", "csv": "ROBOTS.csv TASKS.csv"}[args.kind]
-        raise ConfigError(f"{args.kind} takes {wanted} file(s): {usage}, got {len(args.files)}")
-    if args.kind != "csv":
+        usage = {"mspsp": "FILE.dzn", "psplib": "FILE.sm or FILE.rcp", "csv": "ROBOTS.csv TASKS.csv",
+                 "dcmrta": "a folder with graph.yaml, task_param.yaml, vehicle_param.yaml, planner_param.yaml"}
+        raise ConfigError(f"{args.kind} takes {wanted} file(s): {usage[args.kind]}, got {len(args.files)}")
+    if args.kind == "dcmrta":
+        if args.sites or args.objective != "makespan":
+            raise ConfigError("--sites and --objective are for csv")
+        inst = _import_dcmrta(Path(args.files[0]), args.name)
+    elif args.kind != "csv":
         if args.sites or args.objective != "makespan":
             raise ConfigError("--sites and --objective are for csv")
         inst = (import_mspsp if args.kind == "mspsp" else import_psplib)(args.files[0])
@@ -411,10 +438,13 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--out", help="write the schedule to this file instead of stdout")
 
     p = add("import", cmd_import, "turn a multi-skill project scheduling file (MiniZinc data, .dzn), a PSPLIB "
-                                   "project scheduling file (.sm or Patterson .rcp) or CSV files of robots and "
-                                   "tasks into an lvws-instance/1 file")
-    p.add_argument("kind", choices=("mspsp", "psplib", "csv"))
-    p.add_argument("files", nargs="+", help="mspsp: FILE.dzn; psplib: FILE.sm or FILE.rcp; csv: ROBOTS.csv TASKS.csv")
+                                   "project scheduling file (.sm or Patterson .rcp), CSV files of robots and "
+                                   "tasks, or an instance folder of the DCMRTA / CTAS-D coalition benchmarks "
+                                   "into an lvws-instance/1 file")
+    p.add_argument("kind", choices=("mspsp", "psplib", "csv", "dcmrta"))
+    p.add_argument("files", nargs="+", help="mspsp: FILE.dzn; psplib: FILE.sm or FILE.rcp; csv: ROBOTS.csv "
+                                            "TASKS.csv; dcmrta: the folder of graph.yaml, task_param.yaml, "
+                                            "vehicle_param.yaml, planner_param.yaml")
     p.add_argument("--sites", default=None, help="csv: SITES.csv (name,x,y): the travel extension")
     p.add_argument("--objective", choices=("makespan", "return"), default="makespan",
                    help="csv: the instance's objective")

@@ -1,7 +1,9 @@
 """Importers for the files users already have, into ``lvws-instance/1`` (formats.md,
 "Importing"): the multi-skill project scheduling (MSPSP) instances of the MiniZinc data
 format, the resource-constrained project scheduling (RCPSP) instances of PSPLIB (its
-``.sm`` and the Patterson ``.rcp`` formats), and a plain CSV of robots and one of tasks.
+``.sm`` and the Patterson ``.rcp`` formats), a plain CSV of robots and one of tasks, and
+the coalition benchmarks of DCMRTA / CTAS-D (YAML documents, read by the caller with a
+safe loader: :func:`dcmrta_instance`).
 
 Every error is an :class:`~lvws_ros.errors.InstanceError` naming the file and the line.
 Nothing in a file is evaluated: the DataZinc reader accepts only the assignments the MSPSP
@@ -19,11 +21,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from lvws_ros.core.formats import instance_from_dict
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.travel import build_travel
 from lvws_ros.errors import InstanceError
 
-__all__ = ["import_csv", "import_mspsp", "import_psplib", "parse_dzn"]
+__all__ = ["dcmrta_instance", "import_csv", "import_mspsp", "import_psplib", "parse_dzn"]
 
 # ---------------------------------------------------------------- DataZinc (MSPSP)
 
@@ -517,3 +522,108 @@ def _coord(text: str, where: str) -> float:
     if not math.isfinite(value):
         raise InstanceError(f"{where}: expected a finite number, got {text!r}")
     return value
+
+
+# ---------------------------------------------------------------- DCMRTA / CTAS-D test sets
+
+def _dcmrta_get(data: Any, key: str, where: str) -> Any:
+    if not isinstance(data, dict) or key not in data:
+        raise InstanceError(f"{where}: '{key}' is missing")
+    return data[key]
+
+
+def _dcmrta_number(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InstanceError(f"{where}: expected a number, got {value!r}")
+    return float(value)
+
+
+def _dcmrta_distances(graph: dict[str, Any], n: int, where: str) -> tuple[np.ndarray, float]:
+    """The (n + 1) x (n + 1) distances among the tasks and the depot (index n; the graph's
+    start and end depot nodes n and n + 1 are one place) and the speed (distance / time)."""
+    dist = np.full((n + 1, n + 1), np.nan)
+    np.fill_diagonal(dist, 0.0)
+    speeds = []
+    for key, edge in graph.items():
+        if not key.startswith("edge"):
+            continue
+        at = f"{where} '{key}'"
+        if not isinstance(edge, list) or len(edge) != 6:
+            raise InstanceError(f"{at}: an edge is [from, to, energy, energy variance, distance, time]")
+        a, b = (int(_dcmrta_number(v, at)) for v in edge[:2])
+        d, t = _dcmrta_number(edge[3], at), _dcmrta_number(edge[5], at)
+        a, b = min(a, n), min(b, n)
+        if not (0 <= a <= n and 0 <= b <= n) or d < 0 or t < 0:
+            raise InstanceError(f"{at}: node or value out of range ({n} tasks)")
+        dist[a, b] = dist[b, a] = d
+        if d > 0 and t > 0:
+            speeds.append(d / t)
+    if np.isnan(dist).any():
+        a, b = np.argwhere(np.isnan(dist))[0]
+        raise InstanceError(f"{where}: no edge between nodes {a} and {b}")
+    if not speeds or max(speeds) - min(speeds) > 1e-6 * max(speeds):
+        raise InstanceError(f"{where}: the edges' distance / time ratios differ (one speed per vehicle type)")
+    return dist, speeds[0]
+
+
+def _planar(dist: np.ndarray, where: str) -> np.ndarray:
+    """Points in the plane whose straight-line distances are ``dist`` (classical
+    multidimensional scaling, exact for points of a plane), the last one at the origin."""
+    m = len(dist)
+    centre = np.eye(m) - 1.0 / m
+    w, v = np.linalg.eigh(-0.5 * centre @ (dist ** 2) @ centre)
+    xy = v[:, -2:] * np.sqrt(np.clip(w[-2:], 0.0, None))
+    err = np.abs(np.linalg.norm(xy[:, None] - xy[None], axis=2) - dist).max()
+    if err > 1e-6 * max(1.0, float(dist.max())):
+        raise InstanceError(f"{where}: the distances are not those of points in a plane (off by {err:.3g})")
+    return xy - xy[-1]
+
+
+def dcmrta_instance(graph: dict[str, Any], tasks: dict[str, Any], vehicles: dict[str, Any],
+                    planner: dict[str, Any], name: str, where: str) -> Instance:
+    """An instance in traits from the four YAML documents (already read) of one instance of
+    the DCMRTA / CTAS-D test sets (``graph.yaml``, ``task_param.yaml``,
+    ``vehicle_param.yaml``, ``planner_param.yaml``): ``vehNumPerType`` robots of each
+    vehicle type with its ``capVector`` as traits ``cap0``, ``cap1``, ..., all at the depot
+    and back there at the end (``"objective": "return"``); each task at its own site
+    (recovered from the distances: :func:`_planar`), its duration the graph's node weight,
+    its requirement the ``capReq`` of each ``and`` clause (one ``or`` alternative each). The
+    travel time is distance / speed as the graph's edges give it. ``where`` names the files
+    in errors."""
+    n = int(_dcmrta_number(_dcmrta_get(planner, "taskNum", where), where))
+    counts = _dcmrta_get(planner, "vehNumPerType", where)
+    if not isinstance(counts, list) or not counts:
+        raise InstanceError(f"{where}: 'vehNumPerType' must be a list of counts")
+    traits = [f"cap{c}" for c in range(int(_dcmrta_number(_dcmrta_get(planner, "capNum", where), where)))]
+    sites: dict[str, list[float]] = {}
+    robots: list[dict[str, Any]] = []
+    durations: list[float] = []
+    for k, count in enumerate(counts):
+        vk = f"vehicle{k}"
+        dist, speed = _dcmrta_distances(_dcmrta_get(graph, vk, where), n, f"{where} {vk}")
+        if not sites:
+            xy = _planar(dist, where)
+            sites = {f"t{j}": [float(xy[j, 0]), float(xy[j, 1])] for j in range(n)} | {"depot": [0.0, 0.0]}
+            durations = [_dcmrta_number(_dcmrta_get(graph[vk], f"node{j}", f"{where} {vk}"), f"{where} node{j}")
+                         for j in range(n)]
+        caps = _dcmrta_get(_dcmrta_get(vehicles, vk, where), "capVector", f"{where} {vk}")
+        if not isinstance(caps, list) or len(caps) != len(traits):
+            raise InstanceError(f"{where} {vk}: 'capVector' must hold {len(traits)} amounts")
+        amounts = {t: _dcmrta_number(c, f"{where} {vk} capVector") for t, c in zip(traits, caps, strict=True)}
+        robots += [{"id": f"v{k}_{r}", "traits": amounts, "site": "depot", "speed": speed, "home": "depot"}
+                   for r in range(int(_dcmrta_number(count, f"{where} vehNumPerType")))]
+    out_tasks = []
+    for j in range(n):
+        at = f"{where} task{j}"
+        needs: dict[str, float] = {}
+        for clause, alternatives in _dcmrta_get(tasks, f"task{j}", where).items():
+            if not isinstance(alternatives, dict) or len(alternatives) != 1:
+                raise InstanceError(f"{at} {clause}: exactly one 'or' alternative is supported")
+            need = next(iter(alternatives.values()))
+            cap = int(_dcmrta_number(_dcmrta_get(need, "capId", at), at))
+            if not 0 <= cap < len(traits) or not _dcmrta_get(need, "geq", at):
+                raise InstanceError(f"{at} {clause}: capId {cap} out of range, or not a 'geq' requirement")
+            needs[traits[cap]] = needs.get(traits[cap], 0.0) + _dcmrta_number(_dcmrta_get(need, "capReq", at), at)
+        out_tasks.append({"id": f"t{j}", "requires": needs, "duration": durations[j], "after": [], "site": f"t{j}"})
+    return instance_from_dict({"format": "lvws-instance/1", "name": name, "traits": traits, "objective": "return",
+                               "sites": sites, "robots": robots, "tasks": out_tasks})

@@ -114,6 +114,7 @@ class Planner:
         self.exact_closed = False  # CP-SAT proved its model's optimum from the plan's state
         self.exact_rounds = 0  # CP-SAT solves from the plan's state
         self.lns_rounds = 0  # LNS rounds from the plan's state
+        self.exact_overran = False  # CP-SAT's whole model took far longer than its slice (too large: LNS instead)
         self.unimproved = 0  # improvement rounds in a row that did not shorten the plan
         self.lns_window: int | None = None  # the neighbourhood size LNS adapted to last (None: its default)
         self.open_ended = False  # improving until told otherwise (a process beside a node), not to a deadline
@@ -195,6 +196,7 @@ class Planner:
         if due:  # the world departed from the plan: CP-SAT's bound and proofs no longer hold, the search starts over
             self.proven, self.bound = False, self.base_bound
             self.exact_closed, self.exact_rounds, self.lns_rounds, self.unimproved = False, 0, 0, 0
+            self.exact_overran = False
         if due and quick:
             self.quick_plans(state, deadline)
         if self.plan is None:  # nothing yet (or not even a quick plan fitted): GRP's, however long it takes
@@ -255,10 +257,11 @@ class Planner:
         """Nothing left worth trying from the plan's state (until the world departs from
         the plan): proven optimal, or PATIENCE rounds in a row shortened nothing (a rest
         small enough for CP-SAT's whole model: its proofs hold only for its own model with
-        travel), PATIENCE_LARGE on a larger rest."""
+        travel), PATIENCE_LARGE on a larger rest (or one whose whole model was too large to
+        build in its slice)."""
         if self.proven or self.plan is None:
             return self.proven
-        small = len(self.plan.state.tasks_to_do()) <= self.exact_tasks
+        small = len(self.plan.state.tasks_to_do()) <= self.exact_tasks and not self.exact_overran
         return self.unimproved >= (PATIENCE if small else PATIENCE_LARGE)
 
     def _exact(self, state: State, end: float, deadline: float | None) -> bool:
@@ -274,6 +277,7 @@ class Planner:
         else:
             left = min(end - time.perf_counter(), EXACT_FIRST * 2 ** self.exact_rounds)
         self.exact_rounds += 1
+        began = time.perf_counter()
         try:
             res = solve_exact(state.instance, state=state, time_limit=max(0.05, left) if left < math.inf else 1e9,
                               hint=self.plan.schedule,
@@ -284,7 +288,11 @@ class Planner:
         if res.schedule is None:
             return False
         shorter = self.offer_schedule(res.schedule, "exact")
-        self.exact_closed = res.proven  # optimal in CP-SAT's model: solving it again gives nothing new
+        # optimal in CP-SAT's model: solving it again gives nothing new; or a model that took far
+        # longer than its slice to build and shortened nothing (e.g. 20 robots x 50 tasks with
+        # travel: seconds to build): its rounds go to LNS from here on
+        self.exact_overran = left < math.inf and time.perf_counter() - began > 2 * left + EXACT_FIRST and not shorter
+        self.exact_closed = res.proven or self.exact_overran
         if res.proven and proves_executor_bound(state.instance, res) \
                 and abs(float(res.schedule.makespan) - self.plan.makespan) <= TOLERANCE:
             self.proven = True
