@@ -23,6 +23,12 @@ window leaves it (and when) through the window's tasks it may do and the later t
 does, whose arcs carry the travel; with the objective "return", the way home. Only one
 window's worth of later tasks is in the model then (the circuits grow with the square of
 a robot's tasks in the model), and the window holds DEFAULT_WINDOW_TRAVEL tasks by default.
+CP-SAT is hinted with the incumbent timed on the model's ticks
+(:func:`~lvws_ros.policies.exact._hint_travel`), a solution of the model.
+
+The window adapts (``adaptive``): a task more after a neighbourhood CP-SAT proved within its
+round, a task fewer (down to MIN_WINDOW) after one it could not: the neighbourhoods fit a
+round whatever the team's size.
 
 When most robots are interchangeable (:func:`~lvws_ros.policies.exact.pools_apply`: no
 travel) and the team has more than MAX_ENUMERATED robots (where the exact expert solves
