@@ -9,7 +9,7 @@ BUILD := $(CURDIR)/build
 MSG_SRCS := $(wildcard msg_defs/msg/*.msg) $(wildcard msg_defs/srv/*.srv) $(wildcard msg_defs/action/*.action) msg_defs/CMakeLists.txt msg_defs/package.xml
 PKG_SRCS := setup.py setup.cfg package.xml resource/lvws_ros $(wildcard config/*) \
   $(shell find lvws_ros -name '*.py' -o -name '*.pt' -o -name '*.json' 2>/dev/null)
-EXES := lvws scheduler cell_sim recorder fake_robots
+EXES := lvws scheduler cell_sim recorder fake_robots dispatcher
 
 # The environment is an ament prefix; these make ament_index and rclpy find it.
 export AMENT_PREFIX_PATH := $(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))

@@ -37,6 +37,7 @@ setup(
             "cell_sim = lvws_ros.ros.cell_sim_node:main",
             "recorder = lvws_ros.ros.recorder:main",
             "fake_robots = lvws_ros.robot.fake:main",
+            "dispatcher = lvws_ros.ros.dispatcher_node:main",
         ],
     },
 )

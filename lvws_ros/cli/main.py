@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from lvws_ros import __version__
-from lvws_ros.cli import offline, robots, runtime
+from lvws_ros.cli import dispatch, offline, robots, runtime
 from lvws_ros.errors import LvwsError
 
 
@@ -34,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     offline.add_parsers(add)
     runtime.add_parsers(add)
     robots.add_parsers(add)
+    dispatch.add_parsers(add)
     return parser
 
 
@@ -43,6 +44,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         from lvws_ros.ros.scheduler_node import main as scheduler_main
 
         return scheduler_main(argv[1:])  # rclpy parses --ros-args itself
+    if argv[:1] == ["dispatcher"] and "-h" not in argv and "--help" not in argv:
+        return dispatch.run(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

@@ -35,6 +35,8 @@ from lvws_ros.errors import BagError
 from lvws_ros.registry import LEARNED_POLICIES, make_policy
 from lvws_ros.ros.bag import Run, read_run
 
+WALL_CLOCK = 1e8  # stamps beyond this are seconds since 1970, not a simulation's
+
 
 @dataclass
 class RunReport:
@@ -52,13 +54,16 @@ class RunReport:
     topics: dict[str, int] = field(default_factory=dict)
     # (step, sim time, robot -> ready tasks it could have started); None: inputs not in the bag
     voluntary: list[tuple[int, float, dict[str, tuple[str, ...]]]] | None = None
+    # a dispatcher's run: robot -> {"sent", "succeeded", "failed", "canceled"} goal counts
+    goals: dict[str, dict[str, int]] = field(default_factory=dict)
 
     def text(self) -> str:
         lines = [f"bag: {self.bag}", f"policy: {self.policy}; decisions: {self.decisions}; decision latency "
                  f"p50 {self.latency_ms_p50:.2f} ms, p99 {self.latency_ms_p99:.2f} ms",
                  f"tasks done: {len(self.schedule.assignments)}/{self.instance.num_tasks}"
                  + ("" if self.complete else " (incomplete run)"),
-                 f"makespan: {self.schedule.makespan:.2f} s (sim time)",
+                 f"makespan: {self.schedule.makespan:.2f} s"
+                 + (" (from the first state recorded)" if self.goals else " (sim time)"),
                  "valid by formats.md: " + ("yes" if not self.problems else
                                             "NO: " + "; ".join(str(p) for p in self.problems)),
                  "", "| task | robots | start | end |", "|---|---|---|---|"]
@@ -66,6 +71,9 @@ class RunReport:
         lines += ["", "subteams: " + (", ".join(f"{t} <- {'+'.join(r)}" for t, r in self.subteams) or "none")]
         waits = [f"step {s} (t={t:.2f}): {', '.join(r)}" for s, t, r in self.waits]
         lines += ["robots told to wait: " + ("; ".join(waits) if waits else "none")]
+        if self.goals:
+            lines += ["goals per robot (sent, succeeded, failed, canceled): " + "; ".join(
+                f"{r} {g['sent']}/{g['succeeded']}/{g['failed']}/{g['canceled']}" for r, g in sorted(self.goals.items()))]
         if self.voluntary is None:
             lines += ["voluntary waits: unknown (the decisions' inputs are not all in the bag)"]
         else:
@@ -76,9 +84,11 @@ class RunReport:
         return "\n".join(lines)
 
 
-def executed(teams: Sequence[TeamSnapshot], graph: GraphSnapshot, name: str = "run") -> tuple[Instance, Schedule]:
+def executed(teams: Sequence[TeamSnapshot], graph: GraphSnapshot, name: str = "run",
+             origin: float = 0.0) -> tuple[Instance, Schedule]:
     """The executed instance and schedule of the tasks the final graph holds: every robot
-    any of ``teams`` had (a robot that failed for good still did its earlier work)."""
+    any of ``teams`` had (a robot that failed for good still did its earlier work); times
+    less ``origin``."""
     latest = {r.id: r for team in teams for r in team.robots}
     traits = tuple(graph.trait_names)
     robots = tuple(Robot(r.id, tuple(r.capabilities), r.payload, traits=trait_pairs(traits, r.traits))
@@ -88,7 +98,7 @@ def executed(teams: Sequence[TeamSnapshot], graph: GraphSnapshot, name: str = "r
         duration = t.duration
         if t.status == TaskStatus.DONE and t.start is not None and t.end is not None:
             duration = t.end - t.start
-            out.append(Assignment(t.id, tuple(t.assigned_robots), t.start, t.end))
+            out.append(Assignment(t.id, tuple(t.assigned_robots), t.start - origin, t.end - origin))
         tasks.append(Task(t.id, tuple(t.capabilities), t.payload, max(duration, 1e-9), tuple(t.prerequisites),
                           requires=trait_pairs(traits, t.requires), roles=roles_of(t.roles)))
     inst = Instance(name, tuple(graph.capability_names), robots, tuple(tasks), traits=traits,
@@ -100,7 +110,9 @@ def report_run(run: Run) -> RunReport:
     if not run.teams or not run.graphs:
         raise BagError(f"{run.path}: no team state or task graph recorded")
     graph = run.graphs[-1]
-    inst, sched = executed(run.teams, graph, run.path.name)
+    # a world on wall time (a dispatcher's: seconds since 1970) counts from its first state
+    origin = run.teams[0].stamp if run.teams[0].stamp > WALL_CLOCK else 0.0
+    inst, sched = executed(run.teams, graph, run.path.name, origin)
     policy = run.decisions[0].policy if run.decisions else "?"
     sched.policy = policy
     sched.decisions = len(run.decisions)
@@ -111,7 +123,20 @@ def report_run(run: Run) -> RunReport:
     subteams = [(t, r) for d in run.decisions for t, r in d.assignments if len(r) > 1]
     return RunReport(run.path, inst, sched, complete, problems, len(run.decisions), policy,
                      statistics.median(lat), float(np.percentile(lat, 99)), waits, subteams, run.topics,
-                     recorded_voluntary_waits(run))
+                     recorded_voluntary_waits(run), goal_counts(run.goal_events))
+
+
+_GOAL_COUNTS = {0: "sent", 4: "succeeded", 2: "failed", 5: "failed", 7: "failed", 6: "canceled"}  # GoalEvent kinds
+
+
+def goal_counts(events: Sequence[tuple[int, str, str]]) -> dict[str, dict[str, int]]:
+    """Per robot, its goals sent, succeeded, failed (rejected, aborted, lost) and canceled."""
+    out: dict[str, dict[str, int]] = {}
+    for kind, _task, robot in events:
+        counts = out.setdefault(robot, dict.fromkeys(("sent", "succeeded", "failed", "canceled"), 0))
+        if kind in _GOAL_COUNTS:
+            counts[_GOAL_COUNTS[kind]] += 1
+    return out
 
 
 def recorded_voluntary_waits(run: Run) -> list[tuple[int, float, dict[str, tuple[str, ...]]]] | None:

@@ -226,14 +226,15 @@ class Dispatch:
         what = f"assignment {task} <- {'+'.join(team)}"
         if t is None:
             raise DispatchRefused(f"{what}: unknown task {task!r}")
+        unknown = [rid for rid in team if rid not in self.robots]
+        if unknown:
+            raise DispatchRefused(f"{what}: unknown robot {unknown[0]!r}")
         if t.status != TaskStatus.READY:
             raise DispatchRefused(f"{what}: task {task!r} is {TaskStatus(t.status).name}, not READY")
         if not team or len(set(team)) != len(team):
             raise DispatchRefused(f"{what}: the subteam is empty or names a robot twice")
         for rid in team:
-            r = self.robots.get(rid)
-            if r is None:
-                raise DispatchRefused(f"{what}: unknown robot {rid!r}")
+            r = self.robots[rid]
             if r.failed:
                 raise DispatchRefused(f"{what}: robot {rid!r} is out of the team ({r.failed})")
             if self.busy_with(rid):

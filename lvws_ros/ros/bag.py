@@ -23,11 +23,18 @@ from lvws_ros.core.online import GraphSnapshot, OnlineDecision, TeamSnapshot
 from lvws_ros.errors import BagError
 from lvws_ros.ros.convert import decision_from_msg, diagnostics_from_msg, graph_from_msg, team_from_msg
 from lvws_ros.ros.resources import msg_dir
-from lvws_ros.ros.topics import ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GRAPH_TOPIC, TEAM_TOPIC, split_topic
+from lvws_ros.ros.topics import (
+    ASSIGNMENTS_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    GOAL_EVENTS_TOPIC,
+    GRAPH_TOPIC,
+    TEAM_TOPIC,
+    split_topic,
+)
 
 __all__ = ["Run", "flush", "open_writer", "qos_from_bag", "qos_to_bag", "read_run", "reindex", "typestore"]
 
-LVWS_TYPES = ("RobotState", "TeamState", "Site", "Task", "TaskGraph", "Assignment", "AssignmentArray")
+LVWS_TYPES = ("RobotState", "TeamState", "Site", "Task", "TaskGraph", "Assignment", "AssignmentArray", "GoalEvent")
 
 
 def typestore() -> Typestore:
@@ -169,6 +176,7 @@ class Run:
     graphs: list[GraphSnapshot] = field(default_factory=list)
     decisions: list[OnlineDecision] = field(default_factory=list)
     diagnostics: list[dict[str, str]] = field(default_factory=list)
+    goal_events: list[tuple[int, str, str]] = field(default_factory=list)  # (kind, task, robot): a dispatcher's
     duration_ns: int = 0
     namespace: str = "/"  # the cell's namespace (its topics' prefix)
 
@@ -180,6 +188,8 @@ def _add(run: Run, topic: str, msg: Any) -> None:
         run.graphs.append(graph_from_msg(msg))
     elif topic == ASSIGNMENTS_TOPIC:
         run.decisions.append(decision_from_msg(msg))
+    elif topic == GOAL_EVENTS_TOPIC:
+        run.goal_events.append((int(msg.kind), str(msg.task_id), str(msg.robot_id)))
     else:
         run.diagnostics.extend(diagnostics_from_msg(msg))
 
@@ -192,7 +202,7 @@ def read_run(path: str | Path) -> Run:
     p = Path(path)
     if not p.exists():
         raise BagError(f"{p}: no such bag")
-    wanted = (TEAM_TOPIC, GRAPH_TOPIC, ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC)
+    wanted = (TEAM_TOPIC, GRAPH_TOPIC, ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GOAL_EVENTS_TOPIC)
     try:
         with AnyReader([p], default_typestore=typestore()) as reader:
             run = Run(p, {c.topic: c.msgcount for c in reader.connections}, duration_ns=reader.duration)

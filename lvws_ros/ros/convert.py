@@ -10,15 +10,28 @@ import math
 from typing import Any
 
 from builtin_interfaces.msg import Duration, Time
-from lvws_msgs.msg import Assignment, AssignmentArray, CellTask, RobotState, Site, Task, TaskGraph, TeamState
+from lvws_msgs.msg import (
+    Assignment,
+    AssignmentArray,
+    CellTask,
+    GoalEvent,
+    InstanceTask,
+    RobotState,
+    Site,
+    Task,
+    TaskGraph,
+    TeamState,
+)
 
+from lvws_ros.core.dispatch import GoalNews
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskInfo, TeamSnapshot
 from lvws_ros.errors import ConfigError
 from lvws_ros.sim.config import PART_PAYLOAD
 
 __all__ = ["cell_task_from_msg", "cell_task_to_msg", "decision_from_msg", "decision_to_msg", "from_time",
-           "graph_from_msg", "graph_to_msg", "team_from_msg", "team_to_msg", "to_duration", "to_time"]
+           "goal_event_to_msg", "graph_from_msg", "graph_to_msg", "instance_task_from_msg", "instance_task_to_msg",
+           "team_from_msg", "team_to_msg", "to_duration", "to_time"]
 
 
 def to_time(seconds: float) -> Time:
@@ -174,4 +187,59 @@ def cell_task_from_msg(msg: Any) -> dict[str, Any]:
         entry.update({"from": msg.source, "to": msg.cell})
     else:
         entry["cell"] = msg.cell
+    return entry
+
+
+def goal_event_to_msg(news: GoalNews, stamp: float) -> GoalEvent:
+    return GoalEvent(stamp=to_time(stamp), kind=int(news.kind), task_id=news.task, robot_id=news.robot,
+                     phase=news.phase, progress=float(news.progress), site=news.site, duration=float(news.duration),
+                     message=news.message)
+
+
+_ROLES = {None: InstanceTask.ROLES_DEFAULT, False: InstanceTask.ROLES_NO, True: InstanceTask.ROLES_YES}
+
+
+def instance_task_to_msg(item: dict[str, Any], k: int = 0) -> InstanceTask:
+    """A task object of an instance file (``capabilities``, ``payload``, ``requires``,
+    ``duration``, ``after``, ``site`` or ``from``/``to``, ``roles``) as an InstanceTask
+    (ConfigError naming entry ``k``)."""
+    try:
+        requires = item.get("requires", {})
+        if not isinstance(requires, dict):
+            raise ConfigError(f"task {k}: requires must map trait names to amounts, got {requires!r}")
+        if item.get("roles") not in _ROLES:
+            raise ConfigError(f"task {k}: roles must be true or false, got {item.get('roles')!r}")
+        return InstanceTask(id=str(item["id"]), capabilities=[int(c) for c in item.get("capabilities", [])],
+                            payload=float(item.get("payload", 0.0)), require_names=[str(n) for n in requires],
+                            requires=[float(v) for v in requires.values()], duration=float(item["duration"]),
+                            prerequisites=[str(a) for a in item.get("after", [])],
+                            site=str(item.get("site", item.get("from", ""))), site_to=str(item.get("to", "")),
+                            roles=_ROLES[item.get("roles")])
+    except KeyError as exc:
+        raise ConfigError(f"task {k}: missing key {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"task {k}: {exc}") from None
+
+
+def instance_task_from_msg(msg: Any) -> dict[str, Any]:
+    """An InstanceTask as the instance file writes a task (the inverse of
+    :func:`instance_task_to_msg`); the cell checks it."""
+    entry: dict[str, Any] = {"id": msg.id, "payload": float(msg.payload), "duration": float(msg.duration),
+                             "after": list(msg.prerequisites)}
+    if len(msg.capabilities):
+        entry["capabilities"] = [int(c) for c in msg.capabilities]
+    names, amounts = list(msg.require_names), [float(v) for v in msg.requires]
+    if len(names) != len(amounts):
+        raise ConfigError(f"task {msg.id!r}: {len(names)} require_names but {len(amounts)} requires")
+    if len(set(names)) != len(names):
+        raise ConfigError(f"task {msg.id!r}: require_names names a trait twice: {names}")
+    if names:
+        entry["requires"] = dict(zip(names, amounts, strict=True))
+    if msg.site and msg.site_to and msg.site_to != msg.site:
+        entry.update({"from": msg.site, "to": msg.site_to})
+    elif msg.site:
+        entry["site"] = msg.site
+    roles = {InstanceTask.ROLES_NO: False, InstanceTask.ROLES_YES: True}.get(int(msg.roles))
+    if roles is not None:
+        entry["roles"] = roles
     return entry

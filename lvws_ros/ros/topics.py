@@ -22,6 +22,7 @@ ASSIGNMENTS_TOPIC = "lvws/assignments"
 MARKERS_TOPIC = "lvws/markers"
 DIAGNOSTICS_TOPIC = "diagnostics"
 CLOCK_TOPIC = "clock"
+GOAL_EVENTS_TOPIC = "lvws/goal_events"
 CLOCK_REMAP = ("-r", "/clock:=clock")  # a namespaced node on sim time reads its cell's clock
 
 TEAM_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
@@ -31,6 +32,8 @@ ASSIGNMENTS_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.VOLATILE)
 MARKERS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 DIAGNOSTICS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+GOAL_EVENTS_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.VOLATILE)
 CLOCK_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
                        history=HistoryPolicy.KEEP_LAST)
 
@@ -42,6 +45,7 @@ TOPICS: dict[str, tuple[str, QoSProfile]] = {
     MARKERS_TOPIC: ("visualization_msgs/msg/MarkerArray", MARKERS_QOS),
     DIAGNOSTICS_TOPIC: ("diagnostic_msgs/msg/DiagnosticArray", DIAGNOSTICS_QOS),
     CLOCK_TOPIC: ("rosgraph_msgs/msg/Clock", CLOCK_QOS),
+    GOAL_EVENTS_TOPIC: ("lvws_msgs/msg/GoalEvent", GOAL_EVENTS_QOS),  # the dispatcher's (a world of real robots)
 }
 
 

@@ -1,0 +1,346 @@
+"""Dispatcher node: ``ros2 run lvws_ros dispatcher --ros-args -p cell:=CELL.json`` or
+``lvws dispatcher CELL.json``, the world of a cell of real robots.
+
+It loads a cell (an ``lvws-instance/1`` file: robots, sites, speeds, homes, tasks or none
+yet), publishes its TeamState and TaskGraph for the scheduler (on every change, with one
+stamp, and every ``state_period`` seconds), and carries out each assignment by sending an
+``lvws_msgs/action/ExecuteTask`` goal to every member's ``<robot id>/execute_task`` server
+(relative names: under the node's namespace). The bookkeeping (tasks, goals, failures) is
+:class:`lvws_ros.core.dispatch.Dispatch`; this node is its shell: messages, action
+clients, services, the robots' servers and the clock (wall time, or ``/clock`` with
+``use_sim_time``).
+
+A robot is in the team once its server is up. A member that rejects or aborts its goal,
+or goes silent (no feedback for ``robot_timeout`` seconds; a free robot: its server gone
+for as long) fails the task: the other members' goals are cancelled, the task is READY
+again and the robot leaves TeamState. It comes back when its server answers again: after
+``rejoin_after`` seconds for a robot that rejected or aborted; for one that went silent,
+once a new server is up under its name (a restarted robot) or its server was seen gone
+and is back. Every goal's events go to ``lvws/goal_events`` (lvws_msgs/GoalEvent); what
+the dispatcher refuses (an assignment naming an unknown robot or task, a busy robot) or
+ignores (a result or feedback of a goal already over) is logged and reported on
+``diagnostics`` (WARN), never fatal.
+
+Services (relative): ``submit_tasks`` (lvws_msgs/srv/SubmitInstanceTasks: tasks as the
+instance format writes them), ``cancel_task`` (CancelTask: a running task's goals are
+cancelled), ``set_robot_fault`` (SetRobotFault). With ``exit_when_done`` the node exits 0
+once every task is done (``lvws launch --robots actions``), printing a JSON summary and
+writing it to ``summary``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from action_msgs.msg import GoalStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from lvws_msgs.action import ExecuteTask
+from lvws_msgs.msg import AssignmentArray, GoalEvent, TaskGraph, TeamState
+from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitInstanceTasks
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.action import ActionClient
+from rclpy.node import Node
+
+from lvws_ros.core.dispatch import Dispatch, GoalKind, GoalSpec, Outcome
+from lvws_ros.core.formats import load_instance
+from lvws_ros.errors import ConfigError, DispatchRefused, LvwsError
+from lvws_ros.ros import convert, topics
+from lvws_ros.ros.entry import node_main
+
+__all__ = ["DispatcherNode", "main"]
+
+ACTION = "execute_task"  # each robot's server: <robot id>/execute_task
+WATCH_SECONDS = 0.25  # how often the robots' servers and silences are looked at
+PROGRESS_SECONDS = 2.0
+_ENDS = {GoalStatus.STATUS_ABORTED: GoalKind.ABORTED, GoalStatus.STATUS_CANCELED: GoalKind.CANCELED}
+
+
+def _param(node: Node, name: str, default: Any, text: str, low: float | None = None, read_only: bool = True) -> Any:
+    d = ParameterDescriptor(description=text, read_only=read_only)
+    if low is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=low, to_value=1e6, step=0.0)]
+    return node.declare_parameter(name, default, d).value
+
+
+@dataclass
+class _Server:
+    """What the node knows of one robot's action server."""
+
+    client: ActionClient
+    status_topic: str
+    up_since: float | None = None
+    last_up: float = -1e18
+    seen_down: bool = False  # since the robot left the team
+    dead: frozenset[bytes] = frozenset()  # its server's endpoints when it went silent
+    handles: dict[int, Any] = field(default_factory=dict)  # goal key -> ClientGoalHandle
+
+
+class DispatcherNode(Node):
+    def __init__(self, cell: str = "") -> None:
+        super().__init__("dispatcher")
+        path = str(_param(self, "cell", cell, "the cell: an lvws-instance/1 file (robots, sites, speeds, tasks)"))
+        self.robot_timeout = float(_param(self, "robot_timeout", 5.0, "seconds of silence (no feedback, or "
+                                          "no server) after which a robot counts as lost", 0.1))
+        self.rejoin_after = float(_param(self, "rejoin_after", 5.0, "seconds a robot that rejected or aborted "
+                                         "a goal stays out of the team", 0.0))
+        self.state_period = float(_param(self, "state_period", 1.0, "seconds between two unchanged "
+                                         "TeamState/TaskGraph publications", 0.05))
+        self.frame_id = str(_param(self, "frame_id", "map", "frame of the robots' poses and the sites"))
+        self.exit_when_done = bool(_param(self, "exit_when_done", False, "exit 0 once every task is done"))
+        self.summary_path = str(_param(self, "summary", "", "where to write the JSON summary at exit"))
+        if not path:
+            raise ConfigError("dispatcher: no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
+        self.cell_path = path
+        self.cell = Dispatch(load_instance(path), present=[])
+        self.team_pub = self.create_publisher(TeamState, topics.TEAM_TOPIC, topics.TEAM_QOS)
+        self.graph_pub = self.create_publisher(TaskGraph, topics.GRAPH_TOPIC, topics.GRAPH_QOS)
+        self.events_pub = self.create_publisher(GoalEvent, topics.GOAL_EVENTS_TOPIC, topics.GOAL_EVENTS_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, topics.DIAGNOSTICS_QOS)
+        self.create_subscription(AssignmentArray, topics.ASSIGNMENTS_TOPIC, self.on_assignments,
+                                 topics.ASSIGNMENTS_QOS)
+        self.create_service(SubmitInstanceTasks, "submit_tasks", self.on_submit)
+        self.create_service(CancelTask, "cancel_task", self.on_cancel)
+        self.create_service(SetRobotFault, "set_robot_fault", self.on_fault)
+        self.servers = {r.id: _Server(ActionClient(self, ExecuteTask, f"{r.id}/{ACTION}"),
+                                      self.resolve_topic_name(f"{r.id}/{ACTION}") + "/_action/status")
+                        for r in self.cell.inst.robots}
+        self.goal_of: dict[int, str] = {}  # goal key -> robot
+        self.counts = {"goals": 0, "failures": 0, "refused": 0}
+        self.finished = False
+        self.exit_code = 0
+        self.started_wall = time.monotonic()
+        self.last_published = -1e18
+        self.create_timer(WATCH_SECONDS, self.watch)
+        self.create_timer(PROGRESS_SECONDS, self.log_progress)
+        self.get_logger().info(f"cell {path}: {len(self.servers)} robot(s), {len(self.cell.tasks)} task(s); "
+                               f"goals to <robot>/{ACTION}, robot_timeout {self.robot_timeout:g} s")
+
+    def now(self) -> float:
+        return float(self.get_clock().now().nanoseconds) / 1e9
+
+    # -- publishing ----------------------------------------------------------------------
+    def publish_state(self) -> None:
+        """TeamState and TaskGraph with one stamp (the team only once a robot is up)."""
+        now = self.now()
+        self.last_published = now
+        team = self.cell.team_snapshot(now)
+        if team.robots:
+            self.team_pub.publish(convert.team_to_msg(team, self.frame_id))
+        self.graph_pub.publish(convert.graph_to_msg(self.cell.graph_snapshot(now), self.frame_id))
+
+    def apply(self, out: Outcome) -> None:
+        """Publish what an input did: goal events, cancels, warnings, the new state."""
+        now = self.now()
+        for news in out.news:
+            self.events_pub.publish(convert.goal_event_to_msg(news, now))
+            if news.kind in (GoalKind.REJECTED, GoalKind.ABORTED, GoalKind.LOST):
+                self.counts["failures"] += 1
+        for key in out.cancel:
+            self.cancel_goal(key)
+        for note in out.notes:
+            self.warn(note)
+        if out.changed:
+            self.publish_state()
+        if self.cell.done and self.exit_when_done and not self.finished and self.cell.tasks:
+            self.finish()
+
+    def warn(self, text: str) -> None:
+        self.get_logger().warning(text)
+        status = DiagnosticStatus(level=DiagnosticStatus.WARN, name="lvws_dispatcher", message=text,
+                                  hardware_id=self.get_fully_qualified_name())
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
+
+    # -- assignments and goals -----------------------------------------------------------
+    def on_assignments(self, msg: AssignmentArray) -> None:
+        for a in msg.assignments:
+            try:
+                goals, out = self.cell.assign(a.task_id, list(a.robot_ids), self.now())
+            except DispatchRefused as exc:
+                self.counts["refused"] += 1
+                self.warn(f"decision {msg.decision_step}: {exc}")
+                continue
+            for spec in goals:
+                self.send(spec)
+            self.apply(out)
+
+    def send(self, spec: GoalSpec) -> None:
+        server = self.servers[spec.robot]
+        goal = ExecuteTask.Goal(task_id=spec.task, subteam=list(spec.subteam), site=spec.site, site_to=spec.site_to,
+                                require_names=list(spec.require_names), requires=list(spec.requires),
+                                planned_start=spec.planned_start, planned_duration=spec.planned_duration)
+        self.goal_of[spec.key] = spec.robot
+        self.counts["goals"] += 1
+        future = server.client.send_goal_async(goal, feedback_callback=partial(self.on_feedback, spec.key))
+        future.add_done_callback(partial(self.on_goal_response, spec.key))
+
+    def on_goal_response(self, key: int, future: Any) -> None:
+        handle = future.result()
+        if handle is None or not handle.accepted:
+            self.apply(self.cell.ended(key, self.now(), GoalKind.REJECTED, "the robot's server rejected the goal"))
+            return
+        self.servers[self.goal_of[key]].handles[key] = handle
+        self.apply(self.cell.accepted(key, self.now()))
+        goal = self.cell.goals[key]
+        if goal.cancelling:  # cancelled before the server answered
+            handle.cancel_goal_async()
+        handle.get_result_async().add_done_callback(partial(self.on_result, key))
+
+    def on_feedback(self, key: int, msg: Any) -> None:
+        fb = msg.feedback
+        self.apply(self.cell.feedback(key, self.now(), fb.phase, fb.progress, fb.site,
+                                      (fb.pose.x, fb.pose.y, fb.pose.theta)))
+
+    def on_result(self, key: int, future: Any) -> None:
+        wrapped = future.result()
+        self.servers[self.goal_of[key]].handles.pop(key, None)
+        if wrapped is None:
+            return
+        result, now = wrapped.result, self.now()
+        if wrapped.status == GoalStatus.STATUS_SUCCEEDED and result.success:
+            self.apply(self.cell.succeeded(key, now, result.duration, result.message))
+        else:
+            kind = _ENDS.get(wrapped.status, GoalKind.ABORTED)
+            self.apply(self.cell.ended(key, now, kind, result.message or f"goal status {wrapped.status}"))
+
+    def cancel_goal(self, key: int) -> None:
+        handle = self.servers[self.goal_of[key]].handles.get(key)
+        if handle is not None:  # else: cancelled once the server accepts it (on_goal_response)
+            handle.cancel_goal_async()
+
+    # -- the robots' servers -------------------------------------------------------------
+    def watch(self) -> None:
+        """Servers up or gone, silent goals, robots back."""
+        if self.finished:
+            return
+        now = self.now()
+        for server in self.servers.values():
+            if server.client.server_is_ready():
+                server.last_up = now
+                server.up_since = now if server.up_since is None else server.up_since
+            else:
+                server.up_since, server.seen_down = None, True
+        available = {rid: now - s.last_up <= self.robot_timeout for rid, s in self.servers.items()}
+        before = set(self.cell.failed_robots())
+        out = self.cell.silent(now, self.robot_timeout, available)
+        for rid in set(self.cell.failed_robots()) - before:
+            self.left(rid)
+        for rid in self.back(now):
+            out.add(self.cell.rejoin(rid))
+        self.apply(out)
+        if now - self.last_published >= self.state_period:
+            self.publish_state()
+
+    def endpoints(self, server: _Server) -> frozenset[bytes]:
+        return frozenset(bytes(i.endpoint_gid) for i in self.get_publishers_info_by_topic(server.status_topic))
+
+    def left(self, robot: str) -> None:
+        """Remember the server a robot left the team with (a restart brings a new one)."""
+        server = self.servers[robot]
+        server.seen_down = False
+        server.dead = self.endpoints(server)
+
+    def back(self, now: float) -> list[str]:
+        """Robots out of the team whose server answers again (the module doc's rules)."""
+        out = []
+        for rid, (why, since) in self.cell.failed_robots().items():
+            server = self.servers[rid]
+            if why == "fault" or server.up_since is None:
+                continue
+            if why == "down" or (why in ("rejected", "aborted") and now - since >= self.rejoin_after) or \
+                    (why in ("lost", "canceled") and (server.seen_down or self.endpoints(server) - server.dead)):
+                out.append(rid)
+        return out
+
+    # -- services ------------------------------------------------------------------------
+    def on_submit(self, req: Any, res: Any) -> Any:
+        try:
+            entries = [convert.instance_task_from_msg(t) for t in req.tasks]
+            out = self.cell.add_tasks(entries)
+        except LvwsError as exc:
+            res.success, res.message = False, str(exc)
+            self.warn(f"submit_tasks refused: {exc}")
+            return res
+        res.success, res.message = True, "; ".join(out.notes)
+        self.apply(out)
+        return res
+
+    def on_cancel(self, req: Any, res: Any) -> Any:
+        return self._answer(res, lambda: self.cell.cancel(req.task_id, self.now()))
+
+    def on_fault(self, req: Any, res: Any) -> Any:
+        return self._answer(res, lambda: self.cell.fault(req.robot_id, bool(req.failed), self.now()))
+
+    def _answer(self, res: Any, call: Any) -> Any:
+        try:
+            out = call()
+        except DispatchRefused as exc:
+            res.success, res.message = False, str(exc)
+            self.warn(str(exc))
+            return res
+        res.success, res.message = True, "; ".join(out.notes)
+        self.apply(out)
+        return res
+
+    # -- the end -------------------------------------------------------------------------
+    def log_progress(self) -> None:
+        if not self.finished:
+            counts = ", ".join(f"{n} {k}" for k, n in sorted(self.cell.counts().items()))
+            present = len(self.cell.inst.robots) - len(self.cell.failed_robots())
+            self.get_logger().info(f"progress: {counts or 'no tasks'}; {present}/{len(self.servers)} robots in the "
+                                   f"team, {self.counts['goals']} goals, {self.counts['failures']} failed")
+
+    def summary(self) -> dict[str, Any]:
+        graph = self.cell.graph_snapshot(self.now())
+        ends = [t.end for t in graph.tasks if t.end is not None]
+        starts = [t.start for t in graph.tasks if t.start is not None]
+        return {"cell": self.cell_path, "tasks": len(graph.tasks), "tasks_done": len(ends),
+                "makespan": (max(ends) - min(starts)) if ends and starts else 0.0, **self.counts,
+                "failed_robots": sorted(self.cell.failed_robots()), "error": "",
+                "wall_seconds": time.monotonic() - self.started_wall}
+
+    def finish(self) -> None:
+        self.finished = True
+        summary = self.summary()
+        self.get_logger().info(f"all {summary['tasks']} tasks done: makespan {summary['makespan']:.2f} s")
+        if self.summary_path:
+            Path(self.summary_path).parent.mkdir(parents=True, exist_ok=True)
+            Path(self.summary_path).write_text(json.dumps(summary, indent=1))
+        print(json.dumps(summary), flush=True)
+
+
+def run(node: DispatcherNode) -> int:
+    """Spin until the cell is done (with ``exit_when_done``), then a moment more so the
+    recorder takes the final state."""
+    while rclpy.ok() and not node.finished:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    end = time.monotonic() + 0.5
+    while rclpy.ok() and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    return node.exit_code
+
+
+def build_parser(prog: str = "dispatcher") -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=prog, description=(
+        "The world of a cell of real robots: publishes TeamState and TaskGraph for the scheduler and carries out "
+        "its assignments as ExecuteTask goals to <robot id>/execute_task. ROS parameters: cell, robot_timeout, "
+        "rejoin_after, state_period, frame_id, exit_when_done, summary, use_sim_time."))
+    p.add_argument("cell", nargs="?", default="", help="the cell (lvws-instance/1); or -p cell:=CELL.json")
+    return p
+
+
+def main(argv: list[str] | None = None, prog: str = "dispatcher") -> int:
+    return node_main(prog, argv, build_parser(prog), lambda args: DispatcherNode(args.cell), run, interrupted=0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

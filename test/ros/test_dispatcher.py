@@ -1,0 +1,254 @@
+"""The dispatcher over real DDS, each node its own process: the scheduler (grp), the
+dispatcher of a cell file and ``lvws fake-robots`` (ExecuteTask servers); a test node
+watches the goal events, the task graph and the diagnostics. A cell of 6 robots with
+subteams, travel and precedence is done and its executed schedule, rebuilt from the bag,
+passes ``lvws check``; a robot that aborts, and one whose process is killed with SIGKILL,
+fail their task, which is planned again, and the run completes valid; the killed robot
+is used again once its server is back; ``cancel_task`` cancels every member's goal; bad
+input is named, never fatal."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+import rclpy
+from lvws_msgs.msg import Assignment, AssignmentArray, GoalEvent, Task, TaskGraph
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from lvws_ros.ros.topics import (
+    ASSIGNMENTS_QOS,
+    ASSIGNMENTS_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    GOAL_EVENTS_TOPIC,
+    GRAPH_QOS,
+    GRAPH_TOPIC,
+    message_class,
+)
+
+pytestmark = pytest.mark.ros
+
+REPO = Path(__file__).resolve().parents[2]
+RATE = 5.0  # the fake robots' time runs this much faster than the clock
+TIMEOUT = 1.5  # the dispatcher's robot_timeout (s)
+CELL = {
+    "format": "lvws-instance/1", "name": "six-robots", "capabilities": ["lift", "weld", "scan", "paint"],
+    "sites": {"dock": [0, 0], "a": [3, 0], "b": [3, 4], "c": [0, 4]},
+    "robots": [
+        {"id": "m1", "capabilities": [1, 0, 0, 0], "payload": 2, "site": "dock", "speed": 2.0},
+        {"id": "m2", "capabilities": [1, 0, 0, 0], "payload": 2, "site": "dock", "speed": 2.0},
+        {"id": "m3", "capabilities": [1, 0, 0, 1], "payload": 3, "site": "dock", "speed": 1.5},
+        {"id": "s1", "capabilities": [0, 0, 1, 0], "payload": 1, "site": "dock", "speed": 2.0},
+        {"id": "arm_b", "capabilities": [0, 1, 0, 0], "payload": 1, "site": "b"},
+        {"id": "arm_c", "capabilities": [0, 1, 0, 0], "payload": 1, "site": "c"}],
+    "tasks": [
+        {"id": "t1", "capabilities": [1, 0, 0, 0], "payload": 4, "duration": 2, "after": [], "from": "a", "to": "b"},
+        {"id": "t2", "capabilities": [1, 0, 0, 0], "payload": 2, "duration": 2, "after": [], "from": "a", "to": "c"},
+        {"id": "t3", "capabilities": [0, 1, 0, 0], "payload": 0, "duration": 3, "after": ["t1"], "site": "b"},
+        {"id": "t4", "capabilities": [0, 1, 0, 0], "payload": 0, "duration": 2, "after": ["t2"], "site": "c"},
+        {"id": "t5", "capabilities": [0, 0, 1, 0], "payload": 0, "duration": 1, "after": ["t3"], "site": "b"},
+        {"id": "t6", "capabilities": [1, 0, 1, 0], "payload": 3, "duration": 2, "after": ["t4"], "from": "c",
+         "to": "dock"},
+        {"id": "t7", "capabilities": [0, 0, 1, 0], "payload": 0, "duration": 1, "after": [], "site": "a"},
+        {"id": "t8", "capabilities": [0, 0, 0, 1], "payload": 0, "duration": 1, "after": ["t5"], "site": "b"}],
+}
+
+
+@dataclass
+class Cell:
+    """The processes of a run and what the test node saw."""
+
+    path: Path
+    node: Any
+    executor: Any
+    procs: dict[str, subprocess.Popen[str]] = field(default_factory=dict)
+    events: list[GoalEvent] = field(default_factory=list)
+    graphs: list[TaskGraph] = field(default_factory=list)
+    diags: list[str] = field(default_factory=list)
+
+    def spin(self, seconds: float, until: Callable[[], bool]) -> bool:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            if until():
+                return True
+            self.executor.spin_once(timeout_sec=0.05)
+        return until()
+
+    def done(self) -> bool:
+        return bool(self.graphs) and bool(self.graphs[-1].tasks) and \
+            all(t.status == Task.STATUS_DONE for t in self.graphs[-1].tasks)
+
+    def of(self, kind: int, robot: str | None = None) -> list[GoalEvent]:
+        return [e for e in self.events if e.kind == kind and (robot is None or e.robot_id == robot)]
+
+    def robots(self, robots: str, *extra: str) -> subprocess.Popen[str]:
+        return _start([sys.executable, "-m", "lvws_ros.cli", "fake-robots", str(self.path), "--robots", robots,
+                       "--rate", str(RATE), *extra])
+
+    def output(self, name: str) -> str:
+        proc = self.procs[name]
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            return proc.communicate(timeout=15)[0]
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            return proc.communicate()[0]
+
+
+def _start(cmd: Sequence[str]) -> subprocess.Popen[str]:
+    return subprocess.Popen(list(cmd), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+
+@contextmanager
+def cell(ros_context: Any, tmp_path: Path, name: str, robots: dict[str, Sequence[str]] | None = None,
+         bag: Path | None = None, data: dict[str, Any] | None = None) -> Iterator[Cell]:
+    """Scheduler (grp), dispatcher and the fake robots (process name -> its arguments;
+    default: one process for every robot), and a recorder when ``bag`` is given."""
+    path = tmp_path / "cell.json"
+    path.write_text(json.dumps(data or CELL))
+    node = rclpy.create_node(name, context=ros_context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    c = Cell(path, node, executor)
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(GoalEvent, GOAL_EVENTS_TOPIC, c.events.append, reliable)
+    node.create_subscription(TaskGraph, GRAPH_TOPIC, c.graphs.append, GRAPH_QOS)
+    node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS_TOPIC,
+                             lambda m: c.diags.extend(s.message for s in m.status), reliable)
+    try:
+        if bag is not None:
+            c.procs["recorder"] = _start([sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag)])
+        c.procs["scheduler"] = _start([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args",
+                                       "-p", "policy:=grp"])
+        c.procs["dispatcher"] = _start([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path), "--ros-args",
+                                        "-p", f"robot_timeout:={TIMEOUT}", "-p", "rejoin_after:=2.0"])
+        for pname, args in (robots or {"robots": [",".join(r["id"] for r in CELL["robots"])]}).items():
+            c.procs[pname] = c.robots(*args)
+        yield c
+    finally:
+        for proc in c.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        for proc in c.procs.values():
+            try:
+                proc.communicate(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.communicate()
+        node.destroy_node()
+
+
+def executed_is_valid(bag: Path, tmp_path: Path) -> str:
+    """``lvws report`` of the bag, and ``lvws check`` of the executed instance and schedule it rebuilds."""
+    from lvws_ros.cli.report import report
+    from lvws_ros.core.formats import save_instance, save_schedule
+
+    rep = report(bag)
+    assert rep.complete, rep.text()
+    save_instance(rep.instance, tmp_path / "executed_instance.json")
+    save_schedule(rep.schedule, tmp_path / "executed.json")
+    check = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "check", str(tmp_path / "executed_instance.json"),
+                            str(tmp_path / "executed.json")], capture_output=True, text=True)
+    assert check.returncode == 0, check.stdout + check.stderr
+    return rep.text()
+
+
+def test_six_robots_with_subteams_travel_and_precedence_complete_and_the_bag_checks(ros_context, tmp_path):
+    bag = tmp_path / "bag"
+    with cell(ros_context, tmp_path, "lvws_dispatch_watch", bag=bag) as c:
+        assert c.spin(60, c.done), f"not done: {[(t.id, t.status) for t in c.graphs[-1].tasks]}"
+        c.spin(1.0, lambda: False)  # the recorder takes the last state
+    teams: dict[str, set[str]] = {}
+    for e in c.of(GoalEvent.KIND_SUCCEEDED):
+        teams.setdefault(e.task_id, set()).add(e.robot_id)
+    assert set(teams) == {t["id"] for t in CELL["tasks"]}
+    assert teams["t6"] >= {"s1"} and len(teams["t6"]) > 1 and len(teams["t1"]) > 1  # subteams ran
+    assert not c.of(GoalEvent.KIND_ABORTED) and not c.of(GoalEvent.KIND_LOST)
+    assert len(c.of(GoalEvent.KIND_SENT)) == sum(len(r) for r in teams.values())
+    text = executed_is_valid(bag, tmp_path)
+    assert "valid by formats.md: yes" in text and "goals per robot" in text
+    report = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "report", str(bag)], capture_output=True, text=True)
+    assert report.returncode == 0 and "goals per robot" in report.stdout, report.stdout + report.stderr
+
+
+def test_a_robot_that_aborts_fails_its_task_which_is_planned_again_and_the_run_completes(ros_context, tmp_path):
+    bag = tmp_path / "bag"
+    with cell(ros_context, tmp_path, "lvws_dispatch_abort", bag=bag,
+              robots={"robots": ["m1,m2,m3,s1,arm_b,arm_c", "--abort", "m1:t1", "--abort", "m2:t2"]}) as c:
+        assert c.spin(60, c.done), c.output("dispatcher")
+        c.spin(1.0, lambda: False)
+    aborts = c.of(GoalEvent.KIND_ABORTED)
+    assert aborts and {(e.robot_id, e.task_id) for e in aborts} <= {("m1", "t1"), ("m2", "t2")}
+    # each abort cancelled the other members' goals of that try
+    done = {e.task_id: e.robot_id for e in c.of(GoalEvent.KIND_SUCCEEDED)}
+    assert "t1" in done and "t2" in done
+    assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
+
+
+def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_used_once_back(ros_context, tmp_path):
+    bag = tmp_path / "bag"
+    with cell(ros_context, tmp_path, "lvws_dispatch_kill", bag=bag,
+              robots={"robots": ["m1,m2,s1,arm_b,arm_c"], "m3": ["m3"]}) as c:
+        assert c.spin(60, lambda: any(e.phase == "working" for e in c.of(GoalEvent.KIND_FEEDBACK, "m3")))
+        task = c.of(GoalEvent.KIND_FEEDBACK, "m3")[-1].task_id
+        c.procs["m3"].send_signal(signal.SIGKILL)
+        killed = time.monotonic()
+        assert c.spin(TIMEOUT + 10, lambda: bool(c.of(GoalEvent.KIND_LOST, "m3")))
+        assert time.monotonic() - killed < TIMEOUT + 2.0  # detected within the timeout (plus the watch's period)
+        lost = len(c.events)
+        c.procs["m3 again"] = c.robots("m3")
+        assert c.spin(60, c.done), c.output("dispatcher")
+        c.spin(1.0, lambda: False)
+    again = [e for e in c.events[lost:] if e.kind == GoalEvent.KIND_SUCCEEDED and e.robot_id == "m3"]
+    assert again  # back in the team, and used (t8 needs its paint)
+    assert task in {e.task_id for e in c.events[lost:] if e.kind == GoalEvent.KIND_SUCCEEDED}  # planned again
+    assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
+
+
+def test_cancel_task_cancels_every_members_goal_and_bad_assignments_are_named_not_fatal(ros_context, tmp_path):
+    from lvws_msgs.srv import CancelTask
+
+    slow = {**CELL, "tasks": [{**t, "duration": 60} if t["id"] == "t1" else t for t in CELL["tasks"]]}
+    with cell(ros_context, tmp_path, "lvws_dispatch_cancel", data=slow) as c:
+        pub = c.node.create_publisher(AssignmentArray, ASSIGNMENTS_TOPIC, ASSIGNMENTS_QOS)
+        working = lambda: {e.robot_id for e in c.of(GoalEvent.KIND_FEEDBACK) if e.task_id == "t1"}  # noqa: E731
+        assert c.spin(60, lambda: len(working()) > 1)
+        members = {e.robot_id for e in c.of(GoalEvent.KIND_SENT) if e.task_id == "t1"}
+        assert c.spin(10, lambda: pub.get_subscription_count() >= 2)  # the dispatcher and the scheduler
+        pub.publish(AssignmentArray(decision_step=999, assignments=[Assignment(task_id="t7", robot_ids=["ghost"]),
+                                                                    Assignment(task_id="t99", robot_ids=["s1"])]))
+        client = c.node.create_client(CancelTask, "cancel_task")
+        assert client.wait_for_service(timeout_sec=10)
+        future = client.call_async(CancelTask.Request(task_id="t1"))
+        assert c.spin(10, future.done) and future.result().success, future.result()
+        assert c.spin(10, lambda: {e.robot_id for e in c.of(GoalEvent.KIND_CANCELED) if e.task_id == "t1"}
+                      == members)
+        assert c.spin(60, c.done), c.output("dispatcher")
+        assert c.procs["dispatcher"].poll() is None  # alive
+    assert len(members) > 1 and "t1" not in {t.id for t in c.graphs[-1].tasks}
+    assert any("unknown robot 'ghost'" in d for d in c.diags), c.diags
+    assert any("unknown task 't99'" in d for d in c.diags), c.diags
+
+
+def test_bad_cell_file_exits_2_naming_the_unknown_trait(tmp_path):
+    bad = {**CELL, "traits": ["reach"],
+           "tasks": [{**CELL["tasks"][0], "requires": {"strength": 2}}]}
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(bad))
+    out = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path)], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert str(path) in out.stderr and "strength" in out.stderr and "Traceback" not in out.stderr
+
