@@ -142,6 +142,40 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
     return out
 
 
+def actions_cell(out: Path, config: str = "", instance: str = "") -> Path:
+    """The cell of a run with ``--robots actions``: ``instance`` (checked), else the
+    simulator's cell (``config``, default the case study) written as an instance file."""
+    from lvws_ros.core.formats import load_instance, save_instance
+
+    if instance:
+        load_instance(instance)
+        return Path(instance).resolve()
+    from lvws_ros.ros.resources import case_study_config
+    from lvws_ros.sim.config import load_cell_config
+    from lvws_ros.sim.world import CellSim
+
+    path = out / "cell.json"
+    save_instance(CellSim(load_cell_config(config or case_study_config())).inst, path)
+    return path.resolve()
+
+
+def _actions_commands(commands: dict[str, list[str]], cell: Path, rate: float, summary: Path,
+                      namespace: str) -> dict[str, list[str]]:
+    """``commands`` with the dispatcher and fake robots (``lvws fake-robots``) in place of
+    the simulator, every node on wall time (no simulator publishes a clock)."""
+    def wall(cmd: list[str]) -> list[str]:  # without "-p use_sim_time:=..."
+        drop = {k for k, a in enumerate(cmd) if a.startswith("use_sim_time:=") and k and cmd[k - 1] == "-p"}
+        return [a for k, a in enumerate(cmd) if k not in drop and k + 1 not in drop]
+
+    out = {name: wall(cmd) for name, cmd in commands.items() if name != "cell_sim"}
+    ns = ["-r", f"__ns:={namespace}"] if namespace else []
+    out["fake_robots"] = [sys.executable, "-m", "lvws_ros.robot.fake", str(cell), "--rate", str(float(rate)),
+                          *(["--namespace", namespace] if namespace else [])]
+    out["dispatcher"] = [sys.executable, "-m", "lvws_ros.ros.dispatcher_node", str(cell), "--ros-args", *ns,
+                         "-p", "exit_when_done:=true", "-p", f"summary:={summary}"]
+    return out
+
+
 def _param(value: object) -> str:
     """A value as ``-p name:=value`` takes it (YAML; a string that YAML would read as
     another type is quoted)."""
@@ -256,13 +290,16 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
            config: str = "", bag_dir: str | Path = "bags", out_dir: str | Path = "out", name: str | None = None,
            params_file: str | None = None, gif: bool = True, timeout: float = 600.0,
            domain_id: int | None = None, sync: bool = True, namespace: str = "", events: str | None = None,
-           dashboard: int | None = None, log: Any = print) -> LaunchResult:
+           dashboard: int | None = None, robots: str = "sim", instance: str = "",
+           log: Any = print) -> LaunchResult:
     """Run the case study end to end; raises LaunchError (children stopped) on failure.
     The configuration, the parameter file, the policy, the model and the namespace are
     checked before any process starts (ConfigError / PolicyError). ``policy``/``seed``
     None: the parameter file's, else the scheduler's defaults. ``dashboard``: also serve the
     web dashboard of the run on this port (127.0.0.1) while it lasts, with a new token (the
-    printed URL carries it)."""
+    printed URL carries it). ``robots="actions"``: the dispatcher and fake robots (ExecuteTask
+    servers at ``rate``) instead of the simulator, on the cell ``instance`` (an
+    lvws-instance/1 file; default: the simulator's cell written as one), on wall time."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
 
     namespace = check_namespace(namespace)
@@ -282,6 +319,8 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
                          file_params=in_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
                          namespace=namespace, events=events, dashboard=dashboard)
+    if robots == "actions":
+        commands = _actions_commands(commands, actions_cell(out, config, instance), rate, summary_path, namespace)
     children: list[Child] = []
     interrupted: list[int] = []
 
