@@ -12,9 +12,9 @@ import pytest
 from sphinx.cmd.build import build_main
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-PAGES = ("index", "install", "offline", "ros", "dashboard", "formats", "architecture", "learning", "results", "scale",
+PAGES = ("index", "install", "offline", "ros", "robots", "dashboard", "formats", "architecture", "learning", "results", "scale",
          "sampling_and_self_improvement", "benchmarks", "wait_head_experiment", "api/index", "api/core",
-         "api/policies", "api/learning", "api/sim", "api/ros", "tutorials/own_cell", "tutorials/fleet",
+         "api/policies", "api/learning", "api/sim", "api/ros", "api/robot", "tutorials/own_cell", "tutorials/fleet",
          "tutorials/fine_tune")
 
 

@@ -12,7 +12,7 @@ from lvws_ros.robot.options import add_arguments
 def cmd_fake_robots(args: argparse.Namespace) -> int:
     from lvws_ros.robot.fake import run
 
-    return run(args, ["lvws"])
+    return run(args)
 
 
 def add_parsers(add: Callable[..., argparse.ArgumentParser]) -> None:

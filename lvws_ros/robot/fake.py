@@ -10,10 +10,12 @@ speed, never leaves its site, and aborts a goal elsewhere), then works for
 ``goal.site``). It does not wait for the rest of its subteam: on arrival it reports
 ``working``. Feedback comes every 0.1 s of wall time: the phase, the progress over travel
 and work together, the site (empty while travelling) and the pose (interpolated between
-the sites' coordinates). A goal cancelled on the way leaves the robot at the site it came
-from (the fake robot turns back at once); one cancelled while working, at the task's site.
-Travel and work take ``--rate`` times less time on the node's clock (the result's
-duration and the ``progress`` are in the robot's own, faster, seconds).
+the sites' coordinates). A transport's work (``site_to`` elsewhere) moves the robot from
+``site`` to ``site_to``, reported between sites. A goal stopped on the way (cancelled or
+aborted) leaves the robot between sites, at the pose it last reported (its next travel is
+the straight line from there); one stopped while working, at the task's site. With
+``--rate R`` travel and work take R times less time on the node's clock; the result's
+duration is in the robot's own, faster, seconds (the cell's).
 
 Scripted faults: ``--abort ROBOT:TASK`` aborts that goal halfway through the work with a
 message; ``--crash ROBOT:TASK`` ends the whole process there and then (``os._exit``, as a
@@ -62,7 +64,9 @@ class FakeRobot(TaskServer):
         k = instance.robot_index[robot_id]
         travel = instance.travel
         self.speed = travel.robot_speed[k] if travel is not None else 0.0
-        self.site = travel.robot_site[k] if travel is not None else -1  # index into travel.sites; -1: no sites
+        # the site the robot is at (an index into travel.sites); None: between sites, at xy (or a cell without sites)
+        self.site: int | None = travel.robot_site[k] if travel is not None else None
+        self.xy = travel.coordinates[travel.robot_site[k]] if travel is not None else (0.0, 0.0)
         self.theta = 0.0
 
     def now(self) -> float:
@@ -72,7 +76,7 @@ class FakeRobot(TaskServer):
     @property
     def site_name(self) -> str:
         travel = self.instance.travel
-        return travel.sites[self.site] if travel is not None and self.site >= 0 else ""
+        return travel.sites[self.site] if travel is not None and self.site is not None else ""
 
     def execute(self, goal: Any, feedback: TaskFeedback) -> Any:
         target, end = self._site(goal.site), self._site(goal.site_to or goal.site)
@@ -80,19 +84,20 @@ class FakeRobot(TaskServer):
         work = max(float(goal.planned_duration), 0.0) * duration_factor(
             self.options.noise, self.options.noise_seed, goal.task_id)
         share = way / (way + work) if way + work > 0 else 0.0
-        start = self.site
         if way > 0:
-            self._phase(feedback, TRAVELLING, way, (0.0, share), lambda f: ("", self._pose(start, target, f)))
-        self.site = target
-        here = self.site_name or goal.site
-        self._phase(feedback, WORKING, work, (share, 1.0), lambda f: (here, self._pose(target, target, 1.0)),
+            way_there = self._way(target, goal.site)
+            self._phase(feedback, TRAVELLING, way, (0.0, share), lambda f: ("", way_there(f)[1]))  # no site until working
+        travel = self.instance.travel
+        if travel is not None and target is not None:
+            self.site, self.xy = target, travel.coordinates[target]
+        # a transport (site_to elsewhere) moves its subteam while it works
+        self._phase(feedback, WORKING, work, (share, 1.0), self._way(end, goal.site_to or goal.site),
                     task=goal.task_id)
-        self.site = end
         return ExecuteTask.Result(success=True, duration=work,
                                   message=f"{self.robot_id} did its part of {goal.task_id!r} in {work:.2f} s"
                                           f"{' after ' + format(way, '.2f') + ' s of travel' if way else ''}")
 
-    def _site(self, name: str) -> int:
+    def _site(self, name: str) -> int | None:
         """The index of site ``name`` ('' or a cell without sites: where the robot is)."""
         travel = self.instance.travel
         if not name or travel is None:
@@ -101,23 +106,37 @@ class FakeRobot(TaskServer):
             raise TaskFailed(f"{self.robot_id}: unknown site {name!r} (the cell's sites: {', '.join(travel.sites)})")
         return travel.sites.index(name)
 
-    def _travel_seconds(self, goal: Any, target: int, end: int) -> float:
+    def _travel_seconds(self, goal: Any, target: int | None, end: int | None) -> float:
         travel = self.instance.travel
-        if travel is None or (target == self.site and end == target):
+        if travel is None or target is None or (target == self.site and end == target):
             return 0.0
         if self.speed <= 0:
             raise TaskFailed(f"{self.robot_id} is fixed at site {self.site_name!r}: it cannot do task "
                              f"{goal.task_id!r} at {goal.site!r}" + (f" to {goal.site_to!r}" if end != target else ""))
+        if self.site is None:  # stopped between sites: the straight line from where it stands
+            (xa, ya), (xb, yb) = self.xy, travel.coordinates[target]
+            return math.hypot(xb - xa, yb - ya) / self.speed
         return float(travel.distance[self.site, target]) / self.speed
 
-    def _pose(self, a: int, b: int, share: float) -> tuple[float, float, float] | None:
+    def _way(self, dest: int | None, label: str) -> Where:
+        """Where the robot is at each share of a phase that ends at site ``dest``: still at
+        its site, or on the straight line to ``dest``, between sites (site "") until it is
+        there. The robot's own site and pose follow, so a goal stopped on the way leaves it
+        between sites, at the pose it last reported."""
         travel = self.instance.travel
-        if travel is None or a < 0:
-            return None
-        (xa, ya), (xb, yb) = travel.coordinates[a], travel.coordinates[b]
+        if travel is None or dest is None:
+            return lambda share: (label, None)
+        (xa, ya), (xb, yb), name = self.xy, travel.coordinates[dest], travel.sites[dest]
+        if dest == self.site:
+            return lambda share: (name, (xb, yb, self.theta))
         if (xa, ya) != (xb, yb):
             self.theta = math.atan2(yb - ya, xb - xa)
-        return xa + (xb - xa) * share, ya + (yb - ya) * share, self.theta
+
+        def where(share: float) -> tuple[str, tuple[float, float, float]]:
+            self.xy = (xa + (xb - xa) * share, ya + (yb - ya) * share)
+            self.site = dest if share >= 1.0 else None
+            return (name if share >= 1.0 else "", (*self.xy, self.theta))
+        return where
 
     def _phase(self, feedback: TaskFeedback, phase: str, seconds: float, progress: tuple[float, float],
                where: Where, task: str | None = None) -> None:
@@ -147,22 +166,22 @@ class FakeRobot(TaskServer):
 
 def run(args: argparse.Namespace, ros_args: Sequence[str] | None = None) -> int:
     """Serve the robots of ``args`` (:func:`~lvws_ros.robot.options.add_arguments`) until
-    Ctrl-C or SIGTERM. LvwsError (bad input, naming the file and the item) before any
-    server starts."""
+    Ctrl-C or SIGTERM; ``ros_args``: rclpy's command line (default: ``args.ros_args``).
+    LvwsError (bad input, naming the file and the item) before any server starts."""
     cell = fake_cell(args)
     for r in cell.robots:
         try:
             action_name(r)
         except LvwsError as exc:
             raise type(exc)(f"{cell.path}: {exc}") from None
-    rclpy.init(args=list(ros_args) if ros_args is not None else ["fake_robots"])
+    rclpy.init(args=list(ros_args) if ros_args is not None else ["fake_robots", "--ros-args", *args.ros_args])
     try:
         robots = _make_robots(cell)
     except BaseException:
         rclpy.try_shutdown()
         raise
     sys.stderr.write(f"fake robots of {cell.path}: serving {', '.join(cell.robots)} on "
-                     f"{cell.namespace or '/'} at rate {cell.options.rate:g}\n")
+                     f"{robots[0].get_namespace()} at rate {cell.options.rate:g}\n")
     sys.stderr.flush()
     return serve(robots)
 

@@ -58,6 +58,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--crash", action="append", default=[], metavar="ROBOT:TASK",
                    help="the whole process exits at once when ROBOT is halfway through TASK, as if killed (repeatable)")
     p.add_argument("--use-sim-time", action="store_true", help="follow the simulated clock (/clock) instead of wall time")
+    p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], dest="ros_args", metavar="ARG",
+                   help="ROS arguments to the end of the line (e.g. -r __ns:=/cellA)")
 
 
 def fake_cell(args: argparse.Namespace) -> FakeCell:

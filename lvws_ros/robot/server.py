@@ -36,6 +36,7 @@ from typing import Any
 
 from geometry_msgs.msg import Pose2D
 from lvws_msgs.action import ExecuteTask
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -296,6 +297,11 @@ def serve(servers: Sequence[Node], threads: int | None = None) -> int:
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:
+        if context.ok():
+            raise
+        # a signal shut the context down while the executor made its wait set (an rclpy
+        # race under load): the same as ExternalShutdownException
     finally:
         context.try_shutdown()  # running execute calls see it and stop at their next check
         executor.shutdown(timeout_sec=5.0)

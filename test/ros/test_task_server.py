@@ -101,12 +101,12 @@ class Dispatcher:
             self.executor.spin_once(timeout_sec=0.05)
         return bool(future.done())
 
-    def send(self, robot: str, task: str, subteam: list[str], duration: float, site: str = "b",
+    def send(self, robot: str, task: str, subteam: list[str], duration: float, site: str = "b", site_to: str = "",
              cancel_when_working: bool = False, seconds: float = 20.0, namespace: str = NS) -> Outcome:
         client = self.client(f"{namespace}/{robot}/execute_task")
         sent = time.monotonic()
         feedback: list[tuple[float, Any]] = []
-        goal = ExecuteTask.Goal(task_id=task, subteam=subteam, site=site, planned_duration=duration)
+        goal = ExecuteTask.Goal(task_id=task, subteam=subteam, site=site, site_to=site_to, planned_duration=duration)
         accept = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(
             (time.monotonic() - sent, m.feedback)))
         assert self.wait(accept, 10.0), "no answer to the goal"
@@ -161,7 +161,7 @@ def robots(cell: Path) -> Iterator[subprocess.Popen[str]]:
             assert proc.poll() is None, f"fake-robots died: {log.read_text(encoding='utf-8')}"
         finally:
             code = stop(proc)
-    assert code == 0, f"fake-robots did not exit cleanly on SIGTERM ({code}): {log.read_text(encoding='utf-8')}"
+    assert code == 0, f"fake-robots did not exit cleanly on SIGTERM ({code}): {log.read_text(encoding='utf-8')[-3000:]}"
     assert "Traceback" not in log.read_text(encoding="utf-8")
 
 
@@ -180,6 +180,15 @@ def test_a_goal_travels_then_works_and_succeeds(robots, dispatcher):
     assert out.feedback[-1][0] >= 0.4 and len(out.feedback) >= 0.45 / 0.2
     again = dispatcher.send("mover", "carry_on", ["mover"], 2.0)  # it is at b now: no travel
     assert again.status == GoalStatus.STATUS_SUCCEEDED and again.phases == ["working"], again
+
+
+def test_a_transport_ends_at_its_site_to(robots, dispatcher):
+    out = dispatcher.send("mover", "haul", ["mover"], 2.0, site="dock", site_to="b")
+    assert out.status == GoalStatus.STATUS_SUCCEEDED and out.result.duration == pytest.approx(2.0), out
+    working = [f for _, f in out.feedback if f.phase == "working"]
+    assert working[0].site == "" and working[-1].site == "b"  # it carries from dock to b while it works
+    after = dispatcher.send("mover", "at_b", ["mover"], 1.0, site="b")
+    assert after.status == GoalStatus.STATUS_SUCCEEDED and after.phases == ["working"], after
 
 
 def test_a_goal_whose_subteam_omits_the_robot_is_rejected(robots, dispatcher):
