@@ -1,5 +1,7 @@
-"""``lvws submit / cancel / fault``: change a running cell through ``cell_sim``'s services
-(``submit_tasks``, ``cancel_task``, ``set_robot_fault`` in the cell's namespace).
+"""``lvws submit / cancel / fault``: change a running cell through its world's services
+(``submit_tasks``, ``cancel_task``, ``set_robot_fault`` in the cell's namespace): the
+simulator's, or the dispatcher's (its ``submit_tasks`` takes tasks as instance files write
+them, ``lvws_msgs/srv/SubmitInstanceTasks``: the type served decides).
 
 Run on the cell's DDS domain (``--domain-id``, or ``ROS_DOMAIN_ID``; ``lvws launch``
 prints its domain). Returns the world's answer: (accepted, message).
@@ -41,11 +43,20 @@ def join_domain(domain_id: int | None) -> None:
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 
-def world_request(kind: str, *, tasks: Sequence[dict[str, Any]] = (), target: str = "",
-                  failed: bool = True) -> tuple[Any, Any]:
-    """(service type, request) of one of the simulator's services (LvwsError: unknown kind)."""
-    from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitTasks
+INSTANCE_SUBMIT = "lvws_msgs/srv/SubmitInstanceTasks"  # the dispatcher's submit_tasks (tasks as instance files write them)
 
+
+def world_request(kind: str, *, tasks: Sequence[dict[str, Any]] = (), target: str = "",
+                  failed: bool = True, submit_type: str = "") -> tuple[Any, Any]:
+    """(service type, request) of one of the world's services (LvwsError: unknown kind);
+    ``submit_type`` :data:`INSTANCE_SUBMIT`: the dispatcher's, else the simulator's."""
+    from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitInstanceTasks, SubmitTasks
+
+    if kind == "submit" and submit_type == INSTANCE_SUBMIT:
+        from lvws_ros.ros.convert import instance_task_to_msg
+
+        return SubmitInstanceTasks, SubmitInstanceTasks.Request(
+            tasks=[instance_task_to_msg(t, k) for k, t in enumerate(tasks)])
     if kind == "submit":
         return SubmitTasks, SubmitTasks.Request(tasks=[cell_task_to_msg(t, k) for k, t in enumerate(tasks)])
     if kind == "cancel":
@@ -55,6 +66,18 @@ def world_request(kind: str, *, tasks: Sequence[dict[str, Any]] = (), target: st
     raise LvwsError(f"unknown world change {kind!r}; one of {', '.join(SERVICES)}")
 
 
+def _served_type(node: Any, name: str, timeout: float) -> str:
+    """The type of the service ``name`` (relative to ``node``) once it is seen ('' if never)."""
+    full = node.resolve_service_name(name)
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        for served, types in node.get_service_names_and_types():
+            if served == full and types:
+                return str(types[0])
+        time.sleep(0.1)
+    return ""
+
+
 def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]] = (), target: str = "",
                failed: bool = True, domain_id: int | None = None, timeout: float = 20.0) -> tuple[bool, str]:
     """Call one of the simulator's services and return (accepted, message); LvwsError when
@@ -62,10 +85,11 @@ def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]
     join_domain(domain_id)
     import rclpy
 
-    srv, request = world_request(kind, tasks=tasks, target=target, failed=failed)
     rclpy.init(args=["lvws_world_client"])
     try:
         node = rclpy.create_node("lvws_world_client", namespace=namespace or None)
+        srv, request = world_request(kind, tasks=tasks, target=target, failed=failed,
+                                     submit_type=_served_type(node, SERVICES[kind], timeout) if kind == "submit" else "")
         client = node.create_client(srv, SERVICES[kind])
         name = client.srv_name
         if not client.wait_for_service(timeout_sec=timeout):

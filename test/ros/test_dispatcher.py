@@ -231,6 +231,12 @@ def test_cancel_task_cancels_every_members_goal_and_bad_assignments_are_named_no
         assert c.spin(10, lambda: pub.get_subscription_count() >= 1)  # the dispatcher
         pub.publish(AssignmentArray(decision_step=999, assignments=[Assignment(task_id="t7", robot_ids=["ghost"]),
                                                                     Assignment(task_id="t99", robot_ids=["s1"])]))
+        more = tmp_path / "more.json"
+        more.write_text(json.dumps([{"id": "t9", "capabilities": [0, 0, 1, 0], "payload": 0, "duration": 1,
+                                     "after": ["t7"], "site": "c"}]))
+        submit = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "submit", str(more)], capture_output=True,
+                                text=True, timeout=60)
+        assert submit.returncode == 0 and "t9 added" in submit.stdout, submit.stdout + submit.stderr
         client = c.node.create_client(CancelTask, "cancel_task")
         assert client.wait_for_service(timeout_sec=10)
         future = client.call_async(CancelTask.Request(task_id="t1"))
@@ -240,6 +246,7 @@ def test_cancel_task_cancels_every_members_goal_and_bad_assignments_are_named_no
         assert c.spin(60, c.done), c.output("dispatcher")
         assert c.procs["dispatcher"].poll() is None  # alive
     assert len(members) > 1 and "t1" not in {t.id for t in c.graphs[-1].tasks}
+    assert "t9" in {e.task_id for e in c.of(GoalEvent.KIND_SUCCEEDED)}  # submitted with lvws submit, and done
     assert any("unknown robot 'ghost'" in d for d in c.diags), c.diags
     assert any("unknown task 't99'" in d for d in c.diags), c.diags
 
@@ -254,3 +261,17 @@ def test_bad_cell_file_exits_2_naming_the_unknown_trait(tmp_path):
     assert out.returncode == 2, out.stdout + out.stderr
     assert str(path) in out.stderr and "strength" in out.stderr and "Traceback" not in out.stderr
 
+
+
+def test_lvws_launch_with_action_robots_runs_the_cell_and_its_bag_holds_the_goal_events(tmp_path):
+    from lvws_ros.cli.report import report
+    from lvws_ros.ros.launcher import launch
+
+    path = tmp_path / "cell.json"
+    path.write_text(json.dumps(CELL))
+    res = launch(robots="actions", instance=str(path), policy="grp", rate=10.0, bag_dir=tmp_path / "bags",
+                 out_dir=tmp_path / "out", name="actions", gif=False, timeout=120.0, log=lambda _t: None)
+    assert res.summary["tasks_done"] == len(CELL["tasks"]) and res.summary["failures"] == 0
+    rep = report(res.bag)
+    assert rep.complete and not rep.problems
+    assert sum(g["succeeded"] for g in rep.goals.values()) == res.summary["goals"] >= len(CELL["tasks"])
