@@ -109,3 +109,23 @@ def test_submitted_and_cancelled_tasks_change_the_graph_and_a_cancel_stops_the_r
     assert status(d, "weld") == TaskStatus.READY  # no longer waits for the cancelled task
     d.ended(goals[0].key, 1.5, GoalKind.CANCELED, "")
     assert "r1" in {r.id for r in d.team_snapshot(1.5).robots if r.available}
+
+
+def test_the_snapshots_of_a_cell_of_traits_with_homes_and_of_a_cell_without_tasks_build_the_scheduler_instance():
+    from pathlib import Path
+
+    from lvws_ros.core.formats import load_instance
+    from lvws_ros.core.online import build_instance, check_graph, check_team
+
+    inst = load_instance(Path(__file__).resolve().parents[2] / "examples" / "weld_cell_traits.json")
+    d = Dispatch(inst)
+    team, graph = d.team_snapshot(3.0), d.graph_snapshot(3.0)
+    check_team(team)
+    check_graph(graph)
+    again = build_instance(team, graph)
+    assert again.traits == inst.traits and again.objective == "return" and again.travel is not None
+    assert [r.home for r in team.robots] == ["dock", "dock", "b", "c"]
+    empty = Dispatch(instance_from_dict({**CELL, "tasks": []}))
+    assert empty.graph_snapshot(0.0).tasks == () and empty.done
+    empty.add_tasks([CELL["tasks"][0]])
+    assert status(empty, "carry") == TaskStatus.READY
