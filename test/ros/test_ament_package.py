@@ -11,7 +11,7 @@ from ament_index_python.packages import get_package_prefix, get_package_share_di
 
 from conftest import REPO
 
-EXECUTABLES = ["scheduler", "cell_sim", "recorder", "lvws", "fake_robots"]
+EXECUTABLES = ["scheduler", "cell_sim", "recorder", "lvws", "fake_robots", "dispatcher"]
 
 
 def test_package_prefix_resolves_like_ros2run():
