@@ -60,6 +60,7 @@ __all__ = ["DispatcherNode", "main"]
 ACTION = "execute_task"  # each robot's server: <robot id>/execute_task
 WATCH_SECONDS = 0.25  # how often the robots' servers and silences are looked at
 PROGRESS_SECONDS = 2.0
+WAIT_FOR_SUBSCRIBERS = 20.0  # wall seconds the first state waits for expect_subscribers
 _ENDS = {GoalStatus.STATUS_ABORTED: GoalKind.ABORTED, GoalStatus.STATUS_CANCELED: GoalKind.CANCELED}
 
 
@@ -96,6 +97,8 @@ class DispatcherNode(Node):
         self.frame_id = str(_param(self, "frame_id", "map", "frame of the robots' poses and the sites"))
         self.exit_when_done = bool(_param(self, "exit_when_done", False, "exit 0 once every task is done"))
         self.summary_path = str(_param(self, "summary", "", "where to write the JSON summary at exit"))
+        self.expect_subs = int(_param(self, "expect_subscribers", 0, "publish the team once this many nodes "
+                                      "subscribe to it (the scheduler, a recorder), or after 20 s"))
         if not path:
             raise ConfigError("dispatcher: no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
         self.cell_path = path
@@ -118,6 +121,7 @@ class DispatcherNode(Node):
         self.exit_code = 0
         self.started_wall = time.monotonic()
         self.last_published = -1e18
+        self.waiting = self.expect_subs > 0
         self.create_timer(WATCH_SECONDS, self.watch)
         self.create_timer(PROGRESS_SECONDS, self.log_progress)
         self.get_logger().info(f"cell {path}: {len(self.servers)} robot(s), {len(self.cell.tasks)} task(s); "
@@ -132,9 +136,22 @@ class DispatcherNode(Node):
         now = self.now()
         self.last_published = now
         team = self.cell.team_snapshot(now)
+        if not self.audience():
+            return
         if team.robots:
             self.team_pub.publish(convert.team_to_msg(team, self.frame_id))
         self.graph_pub.publish(convert.graph_to_msg(self.cell.graph_snapshot(now), self.frame_id))
+
+    def audience(self) -> bool:
+        """Whether the expected subscribers are there (or 20 s went by): a bag then holds
+        the first state."""
+        if not self.waiting:
+            return True
+        if self.team_pub.get_subscription_count() >= self.expect_subs or \
+                time.monotonic() - self.started_wall > WAIT_FOR_SUBSCRIBERS:
+            self.waiting = False
+            self.get_logger().info(f"publishing to {self.team_pub.get_subscription_count()} subscriber(s)")
+        return not self.waiting
 
     def apply(self, out: Outcome) -> None:
         """Publish what an input did: goal events, cancels, warnings, the new state."""
@@ -333,7 +350,7 @@ def build_parser(prog: str = "dispatcher") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=(
         "The world of a cell of real robots: publishes TeamState and TaskGraph for the scheduler and carries out "
         "its assignments as ExecuteTask goals to <robot id>/execute_task. ROS parameters: cell, robot_timeout, "
-        "rejoin_after, state_period, frame_id, exit_when_done, summary, use_sim_time."))
+        "rejoin_after, state_period, frame_id, expect_subscribers, exit_when_done, summary, use_sim_time."))
     p.add_argument("cell", nargs="?", default="", help="the cell (lvws-instance/1); or -p cell:=CELL.json")
     return p
 

@@ -160,7 +160,7 @@ def actions_cell(out: Path, config: str = "", instance: str = "") -> Path:
 
 
 def _actions_commands(commands: dict[str, list[str]], cell: Path, rate: float, summary: Path,
-                      namespace: str) -> dict[str, list[str]]:
+                      namespace: str, audience: int) -> dict[str, list[str]]:
     """``commands`` with the dispatcher and fake robots (``lvws fake-robots``) in place of
     the simulator, every node on wall time (no simulator publishes a clock)."""
     def wall(cmd: list[str]) -> list[str]:  # without "-p use_sim_time:=..."
@@ -172,7 +172,8 @@ def _actions_commands(commands: dict[str, list[str]], cell: Path, rate: float, s
     out["fake_robots"] = [sys.executable, "-m", "lvws_ros.robot.fake", str(cell), "--rate", str(float(rate)),
                           *(["--namespace", namespace] if namespace else [])]
     out["dispatcher"] = [sys.executable, "-m", "lvws_ros.ros.dispatcher_node", str(cell), "--ros-args", *ns,
-                         "-p", "exit_when_done:=true", "-p", f"summary:={summary}"]
+                         "-p", "exit_when_done:=true", "-p", f"summary:={summary}",
+                         "-p", f"expect_subscribers:={audience}"]
     return out
 
 
@@ -320,7 +321,8 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
                          file_params=in_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
                          namespace=namespace, events=events, dashboard=dashboard)
     if robots == "actions":
-        commands = _actions_commands(commands, actions_cell(out, config, instance), rate, summary_path, namespace)
+        commands = _actions_commands(commands, actions_cell(out, config, instance), rate, summary_path, namespace,
+                                     3 if dashboard is not None else 2)
     children: list[Child] = []
     interrupted: list[int] = []
 

@@ -274,4 +274,5 @@ def test_lvws_launch_with_action_robots_runs_the_cell_and_its_bag_holds_the_goal
     assert res.summary["tasks_done"] == len(CELL["tasks"]) and res.summary["failures"] == 0
     rep = report(res.bag)
     assert rep.complete and not rep.problems
+    assert rep.voluntary is not None  # every decision's inputs are in the bag: the first state waited for it
     assert sum(g["succeeded"] for g in rep.goals.values()) == res.summary["goals"] >= len(CELL["tasks"])
