@@ -68,6 +68,7 @@ class Goal:
     state: GoalKind = GoalKind.SENT
     heard: float = 0.0  # when the robot last answered (sent, at first)
     cancelling: bool = False  # the dispatcher asked the robot to stop
+    stale_noted: bool = False  # an answer after its end was reported
     working_since: float | None = None  # its first ``working`` feedback
     done_at: float | None = None  # its success
 
@@ -263,8 +264,13 @@ class Dispatch:
         if g is None:
             out.notes.append(f"{what} for unknown goal {key}: ignored")
         elif not g.active:
-            out.notes.append(f"{what} for the goal of {g.robot} on {g.task} that is already "
-                             f"{g.state.name.lower()}: ignored")
+            if not g.stale_noted:  # once per goal: a robot may send feedback ten times a second
+                g.stale_noted = True
+                out.notes.append(f"{what} for the goal of {g.robot} on {g.task} that is already "
+                                 f"{g.state.name.lower()}: ignored")
+            if g.state == GoalKind.LOST and what.startswith(("success", "aborted", "canceled")) \
+                    and self.robots[g.robot].failed == "lost":
+                out.add(self.rejoin(g.robot))  # it was alive after all, and its goal is over: free again
             return None
         return g
 
@@ -339,6 +345,8 @@ class Dispatch:
         out.changed = True
         if kind == GoalKind.CANCELED and g.cancelling:
             return out
+        if kind == GoalKind.LOST:
+            out.cancel.append(key)  # best effort: a robot alive but silent stops, and answers (back then)
         r = self.robots[g.robot]
         r.failed, r.failed_at = kind.name.lower(), now
         out.notes.append(f"robot {g.robot}: goal on {g.task} {kind.name.lower()}"
