@@ -154,8 +154,10 @@ def cmd_launch(args: argparse.Namespace) -> int:
     print("reading the bag back and drawing the Gantt chart ...", flush=True)
     print(report(res.bag, gantt).text())
     print()
-    print(f"makespan:  {s.get('makespan')} s (sim time), {s.get('tasks_done')}/{s.get('tasks')} tasks")
-    print(f"decisions: {s.get('decisions_received')}")
+    clock = "sim time" if args.robots == "sim" else "wall time"
+    print(f"makespan:  {s.get('makespan')} s ({clock}), {s.get('tasks_done')}/{s.get('tasks')} tasks")
+    print(f"decisions: {s.get('decisions_received')}" if args.robots == "sim" else
+          f"goals:     {s.get('goals')} sent, {s.get('failures')} failed")
     print(f"wall time: {s.get('wall_seconds_total', 0):.1f} s")
     print(f"bag:       {res.bag}")
     print(f"gantt:     {gantt}")
