@@ -16,10 +16,11 @@ for as long) fails the task: the other members' goals are cancelled, the task is
 again and the robot leaves TeamState. It comes back when its server answers again: after
 ``rejoin_after`` seconds for a robot that rejected or aborted; for one that went silent,
 once a new server is up under its name (a restarted robot), its server was seen gone
-and is back, or it ends its lost goal after all (a lost goal is cancelled too). Every goal's events go to ``lvws/goal_events`` (lvws_msgs/GoalEvent); what
-the dispatcher refuses (an assignment naming an unknown robot or task, a busy robot) or
-ignores (a result or feedback of a goal already over) is logged and reported on
-``diagnostics`` (WARN), never fatal.
+and is back, or it ends its lost goal after all (a lost goal is cancelled too). Every
+goal's events go to ``lvws/goal_events`` (lvws_msgs/GoalEvent); what the dispatcher
+refuses (an assignment naming an unknown robot or task, a busy robot) or ignores (a
+result or feedback of a goal already over) is logged and reported on ``diagnostics``
+(WARN), never fatal.
 
 Services (relative): ``submit_tasks`` (lvws_msgs/srv/SubmitInstanceTasks: tasks as the
 instance format writes them), ``cancel_task`` (CancelTask: a running task's goals are
