@@ -101,7 +101,7 @@ class DispatcherNode(Node):
         self.expect_subs = int(_param(self, "expect_subscribers", 0, "publish the team once this many nodes "
                                       "subscribe to it (the scheduler, a recorder), or after 20 s"))
         if not path:
-            raise ConfigError("dispatcher: no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
+            raise ConfigError("no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
         self.cell_path = path
         self.cell = Dispatch(load_instance(path), present=[])
         self.team_pub = self.create_publisher(TeamState, topics.TEAM_TOPIC, topics.TEAM_QOS)

@@ -192,7 +192,6 @@ def test_a_robot_that_aborts_fails_its_task_which_is_planned_again_and_the_run_c
         c.spin(1.0, lambda: False)
     aborts = c.of(GoalEvent.KIND_ABORTED)
     assert aborts and {(e.robot_id, e.task_id) for e in aborts} <= {("m1", "t1"), ("m2", "t2")}
-    # each abort cancelled the other members' goals of that try
     done = {e.task_id: e.robot_id for e in c.of(GoalEvent.KIND_SUCCEEDED)}
     assert "t1" in done and "t2" in done
     assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
@@ -207,7 +206,9 @@ def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_us
         c.procs["m3"].send_signal(signal.SIGKILL)
         killed = time.monotonic()
         assert c.spin(TIMEOUT + 10, lambda: bool(c.of(GoalEvent.KIND_LOST, "m3")))
-        assert time.monotonic() - killed < TIMEOUT + 2.0  # detected within the timeout (plus the watch's period)
+        detected = time.monotonic() - killed
+        print(f"SIGKILL detected after {detected:.2f} s (robot_timeout {TIMEOUT} s)")
+        assert detected < TIMEOUT + 2.0  # within the timeout (plus the watch's period and the load's delays)
         lost = len(c.events)
         c.procs["m3 again"] = c.robots("m3")
         assert c.spin(60, c.done), c.output("dispatcher")
