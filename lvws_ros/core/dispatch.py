@@ -371,13 +371,16 @@ class Dispatch:
         out.notes.append(f"task {task} interrupted ({why}): READY again, {len(out.cancel)} goal(s) cancelled")
         return out
 
-    def silent(self, now: float, timeout: float, available: Mapping[str, bool]) -> Outcome:
+    def silent(self, now: float, timeout: float, available: Mapping[str, bool],
+               quiet: Mapping[int, float] | None = None) -> Outcome:
         """Goals whose robot sent nothing for ``timeout`` seconds are lost; so is a free
         robot whose server is not ``available`` (robot -> server up for the last
-        ``timeout`` seconds, as the caller judges it)."""
+        ``timeout`` seconds, as the caller judges it). ``quiet``: goal key -> seconds since
+        its robot was last heard, on the caller's clock (the node: wall time, even on sim
+        time); default: since :attr:`Goal.heard`, on ``now``'s clock."""
         out = Outcome()
         for g in list(self.goals.values()):
-            if g.active and now - g.heard > timeout:
+            if g.active and (now - g.heard if quiet is None else quiet.get(g.key, 0.0)) > timeout:
                 out.add(self.ended(g.key, now, GoalKind.LOST, f"no answer for {timeout:g} s"))
         for rid, r in self.robots.items():
             if not r.failed and not self.busy_with(rid) and not available.get(rid, True):

@@ -78,7 +78,7 @@ class _Server:
 
     client: ActionClient
     status_topic: str
-    up_since: float | None = None
+    up_since: float | None = None  # wall (steady) seconds
     last_up: float = -1e18
     seen_down: bool = False  # since the robot left the team
     dead: frozenset[bytes] = frozenset()  # its server's endpoints when it went silent
@@ -89,8 +89,8 @@ class DispatcherNode(Node):
     def __init__(self, cell: str = "") -> None:
         super().__init__("dispatcher")
         path = str(_param(self, "cell", cell, "the cell: an lvws-instance/1 file (robots, sites, speeds, tasks)"))
-        self.robot_timeout = float(_param(self, "robot_timeout", 5.0, "seconds of silence (no feedback, or "
-                                          "no server) after which a robot counts as lost", 0.1))
+        self.robot_timeout = float(_param(self, "robot_timeout", 5.0, "wall seconds of silence (no feedback, "
+                                          "or no server) after which a robot counts as lost", 0.1))
         self.rejoin_after = float(_param(self, "rejoin_after", 5.0, "seconds a robot that rejected or aborted "
                                          "a goal stays out of the team", 0.0))
         self.state_period = float(_param(self, "state_period", 1.0, "seconds between two unchanged "
@@ -117,6 +117,7 @@ class DispatcherNode(Node):
                                       self.resolve_topic_name(f"{r.id}/{ACTION}") + "/_action/status")
                         for r in self.cell.inst.robots}
         self.goal_of: dict[int, str] = {}  # goal key -> robot
+        self.heard: dict[int, float] = {}  # goal key -> when its robot last answered (wall, steady)
         self.counts = {"goals": 0, "failures": 0, "refused": 0}
         self.finished = False
         self.exit_code = 0
@@ -197,11 +198,13 @@ class DispatcherNode(Node):
                                 require_names=list(spec.require_names), requires=list(spec.requires),
                                 planned_start=spec.planned_start, planned_duration=spec.planned_duration)
         self.goal_of[spec.key] = spec.robot
+        self.heard[spec.key] = time.monotonic()
         self.counts["goals"] += 1
         future = server.client.send_goal_async(goal, feedback_callback=partial(self.on_feedback, spec.key))
         future.add_done_callback(partial(self.on_goal_response, spec.key))
 
     def on_goal_response(self, key: int, future: Any) -> None:
+        self.heard[key] = time.monotonic()
         handle = future.result()
         if handle is None or not handle.accepted:
             self.apply(self.cell.ended(key, self.now(), GoalKind.REJECTED, "the robot's server rejected the goal"))
@@ -214,12 +217,14 @@ class DispatcherNode(Node):
         handle.get_result_async().add_done_callback(partial(self.on_result, key))
 
     def on_feedback(self, key: int, msg: Any) -> None:
+        self.heard[key] = time.monotonic()
         fb = msg.feedback
         self.apply(self.cell.feedback(key, self.now(), fb.phase, fb.progress, fb.site,
                                       (fb.pose.x, fb.pose.y, fb.pose.theta)))
 
     def on_result(self, key: int, future: Any) -> None:
         wrapped = future.result()
+        self.heard.pop(key, None)
         self.servers[self.goal_of[key]].handles.pop(key, None)
         if wrapped is None:
             return
@@ -240,16 +245,16 @@ class DispatcherNode(Node):
         """Servers up or gone, silent goals, robots back."""
         if self.finished:
             return
-        now = self.now()
+        now, wall = self.now(), time.monotonic()  # silence is counted in wall seconds, even on sim time
         for server in self.servers.values():
             if server.client.server_is_ready():
-                server.last_up = now
-                server.up_since = now if server.up_since is None else server.up_since
+                server.last_up = wall
+                server.up_since = wall if server.up_since is None else server.up_since
             else:
                 server.up_since, server.seen_down = None, True
-        available = {rid: now - s.last_up <= self.robot_timeout for rid, s in self.servers.items()}
+        available = {rid: wall - s.last_up <= self.robot_timeout for rid, s in self.servers.items()}
         before = set(self.cell.failed_robots())
-        out = self.cell.silent(now, self.robot_timeout, available)
+        out = self.cell.silent(now, self.robot_timeout, available, {k: wall - t for k, t in self.heard.items()})
         for rid in set(self.cell.failed_robots()) - before:
             self.left(rid)
         for rid in self.back(now):

@@ -113,9 +113,10 @@ def _start(cmd: Sequence[str]) -> subprocess.Popen[str]:
 
 @contextmanager
 def cell(ros_context: Any, tmp_path: Path, name: str, robots: dict[str, Sequence[str]] | None = None,
-         bag: Path | None = None, data: dict[str, Any] | None = None) -> Iterator[Cell]:
+         bag: Path | None = None, data: dict[str, Any] | None = None, sim_time: bool = False) -> Iterator[Cell]:
     """Scheduler (grp), dispatcher and the fake robots (process name -> its arguments;
-    default: one process for every robot), and a recorder when ``bag`` is given."""
+    default: one process for every robot), and a recorder when ``bag`` is given; with
+    ``sim_time``, every node on a simulated clock (helpers/sim_clock.py, 4x wall time)."""
     path = tmp_path / "cell.json"
     path.write_text(json.dumps(data or CELL))
     node = rclpy.create_node(name, context=ros_context)
@@ -127,16 +128,19 @@ def cell(ros_context: Any, tmp_path: Path, name: str, robots: dict[str, Sequence
     node.create_subscription(TaskGraph, GRAPH_TOPIC, c.graphs.append, GRAPH_QOS)
     node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS_TOPIC,
                              lambda m: c.diags.extend(s.message for s in m.status), reliable)
+    sim = ["-p", "use_sim_time:=true"] if sim_time else []
     try:
+        if sim_time:
+            c.procs["clock"] = _start([sys.executable, str(Path(__file__).parent / "helpers" / "sim_clock.py")])
         if bag is not None:
             c.procs["recorder"] = _start([sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag)])
         c.procs["scheduler"] = _start([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args",
-                                       "-p", "policy:=grp"])
+                                       "-p", "policy:=grp", *sim])
         c.procs["dispatcher"] = _start([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path), "--ros-args",
-                                        "-p", f"robot_timeout:={TIMEOUT}", "-p", "rejoin_after:=2.0"])
+                                        "-p", f"robot_timeout:={TIMEOUT}", "-p", "rejoin_after:=2.0", *sim])
         assert c.spin(30, lambda: node.count_publishers(GOAL_EVENTS_TOPIC) > 0)  # no goal event goes unseen
         for pname, args in (robots or {"robots": [",".join(r["id"] for r in CELL["robots"])]}).items():
-            c.procs[pname] = c.robots(*args)
+            c.procs[pname] = c.robots(*args, *(["--use-sim-time"] if sim_time else []))
         yield c
     finally:
         for proc in c.procs.values():
@@ -217,6 +221,17 @@ def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_us
     assert again  # back in the team, and used (t8 needs its paint)
     assert task in {e.task_id for e in c.events[lost:] if e.kind == GoalEvent.KIND_SUCCEEDED}  # planned again
     assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
+
+
+def test_on_sim_time_the_cell_runs_on_the_simulated_clock(ros_context, tmp_path):
+    with cell(ros_context, tmp_path, "lvws_dispatch_sim_time", sim_time=True) as c:
+        began = time.monotonic()
+        assert c.spin(60, c.done), c.output("dispatcher")
+        wall = time.monotonic() - began
+    times = [(t.start_time.sec + t.start_time.nanosec * 1e-9, t.end_time.sec + t.end_time.nanosec * 1e-9)
+             for t in c.graphs[-1].tasks]
+    assert all(100.0 <= a <= b <= 100.0 + 4.0 * (wall + 30.0) for a, b in times), times  # the clock's, not 1970's
+    assert not c.of(GoalEvent.KIND_LOST)  # silence is counted in wall seconds: a fast clock loses no robot
 
 
 def test_cancel_task_cancels_every_members_goal_and_bad_assignments_are_named_not_fatal(ros_context, tmp_path):
