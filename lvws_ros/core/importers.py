@@ -572,11 +572,12 @@ def _planar(dist: np.ndarray, where: str) -> np.ndarray:
     m = len(dist)
     centre = np.eye(m) - 1.0 / m
     w, v = np.linalg.eigh(-0.5 * centre @ (dist ** 2) @ centre)
-    xy = v[:, -2:] * np.sqrt(np.clip(w[-2:], 0.0, None))
+    xy: np.ndarray = v[:, -2:] * np.sqrt(np.clip(w[-2:], 0.0, None))
     err = np.abs(np.linalg.norm(xy[:, None] - xy[None], axis=2) - dist).max()
     if err > 1e-6 * max(1.0, float(dist.max())):
         raise InstanceError(f"{where}: the distances are not those of points in a plane (off by {err:.3g})")
-    return xy - xy[-1]
+    centred: np.ndarray = xy - xy[-1]
+    return centred
 
 
 def dcmrta_instance(graph: dict[str, Any], tasks: dict[str, Any], vehicles: dict[str, Any],
