@@ -39,7 +39,7 @@ from lvws_ros.core.executor import Decision, Policy, State, simulate
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Schedule
 from lvws_ros.core.subteams import TOLERANCE
-from lvws_ros.errors import ModelError
+from lvws_ros.errors import ConfigError, ModelError
 from lvws_ros.learning.features import (
     BUSY_PAIR_FEATURES,
     LEGACY_PAIR_FEATURES,
@@ -166,7 +166,11 @@ def run_jobs(jobs: Sequence[Any], job: Callable[[Any], Any], *, processes: int =
     from tqdm import tqdm
 
     if ray_address is not None:
-        import ray
+        try:
+            import ray
+        except ImportError as exc:  # optional: requirements-dev.txt has it, requirements.txt not
+            raise ConfigError("--ray-address needs Ray, which is not installed: make env-dev installs it "
+                              "(pinned in requirements-dev.txt), or pip install ray") from exc
 
         ray.init(address=None if ray_address == "local" else ray_address,
                  num_cpus=processes if ray_address == "local" else None,

@@ -38,7 +38,7 @@ def test_every_dependency_key_is_one_rosdep_resolves(manifest: str):
 
 def test_the_readme_colcon_steps_build_install_and_test(tmp_path: Path):
     colcon = shutil.which("colcon", path=str(Path(sys.executable).parent))
-    assert colcon, "colcon is pinned in requirements.txt"
+    assert colcon, "colcon is pinned in requirements-dev.txt"
     src = tmp_path / "src" / "lvws_ros"
     files = subprocess.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True, check=True).stdout.split()
     for name in files:  # a clean copy of what is committed
