@@ -22,11 +22,13 @@ export PYTHONDONTWRITEBYTECODE := 1
 # (.stamp-pkg). `env` is what the demo and the commands need (requirements.txt); `env-dev`
 # adds the tests', checks' and docs' tools (requirements-dev.txt), before the package's
 # install so that no two pips write into .venv at once.
+# (make -q first: up to date, it says nothing.)
 JOBS ?= 2
+SETUP = @$(MAKE) --no-print-directory -q $(1) 2>/dev/null || $(MAKE) --no-print-directory -j$(JOBS) $(1)
 env:
-	@$(MAKE) --no-print-directory -j$(JOBS) $(VENV)/.stamp-pkg
+	$(call SETUP,$(VENV)/.stamp-pkg)
 env-dev:
-	@$(MAKE) --no-print-directory -j$(JOBS) $(VENV)/.stamp-pkg DEV_STAMP=$(VENV)/.stamp-dev
+	$(call SETUP,$(VENV)/.stamp-pkg DEV_STAMP=$(VENV)/.stamp-dev)
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
