@@ -17,9 +17,10 @@ the straight line from there); one stopped while working, at the task's site. Wi
 ``--rate R`` travel and work take R times less time on the node's clock; the result's
 duration is in the robot's own, faster, seconds (the cell's).
 
-Scripted faults: ``--abort ROBOT:TASK`` aborts that goal halfway through the work with a
-message; ``--crash ROBOT:TASK`` ends the whole process there and then (``os._exit``, as a
-SIGKILL would: no result, no goodbye).
+Scripted faults: ``--abort ROBOT:TASK`` aborts that robot's first goal of that task
+halfway through the work with a message (a later goal of the same task succeeds);
+``--crash ROBOT:TASK`` ends the whole process there and then (``os._exit``, as a SIGKILL
+would: no result, no goodbye).
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ class FakeRobot(TaskServer):
         super().__init__(robot_id, **server_args)
         self.instance = instance
         self.options = options or FakeOptions()
+        self.aborted: set[str] = set()  # the tasks whose scripted abort happened (each happens once)
         k = instance.robot_index[robot_id]
         travel = instance.travel
         self.speed = travel.robot_speed[k] if travel is not None else 0.0
@@ -159,7 +161,8 @@ class FakeRobot(TaskServer):
                              "the process exits now\n")
             sys.stderr.flush()
             os._exit(CRASH_EXIT)
-        if (self.robot_id, task) in self.options.aborts:
+        if (self.robot_id, task) in self.options.aborts and task not in self.aborted:
+            self.aborted.add(task)
             raise TaskFailed(f"{self.robot_id} aborts task {task!r} at {100 * done:.0f} % of its work "
                              "(a scripted fault: --abort)")
 

@@ -54,7 +54,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="each task's work takes its planned duration x a factor in [1-NOISE, 1+NOISE] (default 0)")
     p.add_argument("--noise-seed", type=int, default=0, help="the noise's seed (the factor also depends on the task)")
     p.add_argument("--abort", action="append", default=[], metavar="ROBOT:TASK",
-                   help="ROBOT aborts TASK halfway through its work, with a message (repeatable)")
+                   help="ROBOT aborts its first goal of TASK halfway through the work, with a message "
+                        "(repeatable)")
     p.add_argument("--crash", action="append", default=[], metavar="ROBOT:TASK",
                    help="the whole process exits at once when ROBOT is halfway through TASK, as if killed (repeatable)")
     p.add_argument("--use-sim-time", action="store_true", help="follow the simulated clock (/clock) instead of wall time")

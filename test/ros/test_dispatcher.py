@@ -191,11 +191,13 @@ def test_six_robots_with_subteams_travel_and_precedence_complete_and_the_bag_che
 def test_a_robot_that_aborts_fails_its_task_which_is_planned_again_and_the_run_completes(ros_context, tmp_path):
     bag = tmp_path / "bag"
     with cell(ros_context, tmp_path, "lvws_dispatch_abort", bag=bag,
-              robots={"robots": ["m1,m2,m3,s1,arm_b,arm_c", "--abort", "m1:t1", "--abort", "m2:t2"]}) as c:
+              robots={"robots": ["m1,m2,m3,s1,arm_b,arm_c",
+                                 *(a for m in ("m1", "m2", "m3") for a in ("--abort", f"{m}:t1"))]}) as c:
+        # whichever lifters take t1 first abort it (each lifter once): its second subteam succeeds
         assert c.spin(60, c.done), c.output("dispatcher")
         c.spin(1.0, lambda: False)
     aborts = c.of(GoalEvent.KIND_ABORTED)
-    assert aborts and {(e.robot_id, e.task_id) for e in aborts} <= {("m1", "t1"), ("m2", "t2")}
+    assert aborts and {e.task_id for e in aborts} == {"t1"}
     done = {e.task_id: e.robot_id for e in c.of(GoalEvent.KIND_SUCCEEDED)}
     assert "t1" in done and "t2" in done
     assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
