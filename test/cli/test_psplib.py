@@ -1,5 +1,6 @@
 """`lvws evaluate --psplib`: the PSPLIB table beside the published optima, the exact
-expert's pool model and the plain cumulative CP-SAT model; `--paper` keeps the section."""
+expert's pool model, the plain cumulative CP-SAT model and `auto` (the planner);
+`--paper` keeps the section."""
 
 from __future__ import annotations
 
@@ -16,19 +17,48 @@ ROOT = Path(__file__).resolve().parents[2]
 PSPLIB = ROOT / "examples" / "psplib"
 
 
-def test_evaluate_psplib_writes_the_table(tmp_path):
+def _evaluate(tmp_path: Path, names: tuple[str, ...], time_limit: str) -> str:
     folder = tmp_path / "psplib"
     folder.mkdir()
-    for name in ("j301_1.sm", "j301_2.sm", "pat1.rcp", "optima.csv"):
+    for name in (*names, "optima.csv"):
         shutil.copy(PSPLIB / name, folder / name)
     done = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "evaluate", "--psplib", str(folder), "--time-limit",
-                           "20", "--workers", "2", "--out-dir", str(tmp_path / "out"), "--quiet"],
+                           time_limit, "--workers", "2", "--out-dir", str(tmp_path / "out"), "--quiet"],
                           capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
-    text = (tmp_path / "out" / "psplib.md").read_text()
+    return (tmp_path / "out" / "psplib.md").read_text()
+
+
+def _row(text: str, name: str) -> list[str]:
+    """The cells of ``name``'s row in the per-instance table."""
+    (line,) = [line for line in text.splitlines() if line.startswith(f"| {name} |")]
+    return [cell.strip() for cell in line.strip("|").split("|")]
+
+
+def test_evaluate_psplib_writes_the_table(tmp_path):
+    text = _evaluate(tmp_path, ("j301_1.sm", "j301_2.sm", "pat1.rcp"), "20")
     assert "| j301_1 | 41 | 30 | 43 |" in text and "| 43* |" in text and "| 47* |" in text
     assert "| pat1 | 10 | 12 | 19 |" in text and "| 19* |" in text
     assert "| J30 | 2 |" in text and "| Patterson | 1 |" in text
+    header = _row(text, "instance")
+    assert header[-4:] == ["plain cumulative", "s", "auto", "s"]
+    auto = header.index("auto")
+    for name, optimum in (("j301_1", 43), ("j301_2", 47), ("pat1", 19)):
+        cells = _row(text, name)
+        assert float(cells[auto].rstrip("*")) >= optimum and float(cells[auto + 1]) > 0
+    summary = _row(text, "set")
+    assert summary[-3:] == ["auto % above", "auto proven", "auto no worse than plain"]
+    j30 = _row(text, "J30")
+    assert float(j30[summary.index("auto % above")]) >= 0 and j30[-1].endswith("/2")
+
+
+def test_auto_in_the_table_is_a_valid_schedule_within_a_tiny_time_limit(tmp_path):
+    text = _evaluate(tmp_path, ("j1201_1.sm",), "1")  # open: 104..105, nothing can prove it in 1 s
+    header, cells = _row(text, "instance"), _row(text, "j1201_1")
+    assert cells[header.index("optimum (lower..best known)")] == "104..105"
+    auto = cells[header.index("auto")]
+    assert not auto.endswith("*") and float(auto) >= 104
+    assert "| J120 | 1 |" in text
 
 
 def test_the_plain_cumulative_model_proves_a_j30_optimum_and_refuses_other_instances():
