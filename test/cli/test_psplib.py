@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from lvws_ros.cli.paper import kept_psplib_section
+from lvws_ros.cli.paper import PSPLIB_SETS, _psplib_set, kept_psplib_section, read_optima
 from lvws_ros.core.importers import import_psplib
 from lvws_ros.policies.cumulative import solve_cumulative
 
@@ -80,3 +80,13 @@ def test_the_paper_report_keeps_the_psplib_section(tmp_path):
     out.write_text("# Results\n\n## Table I\n\nx\n\n## PSPLIB — projects\n\n| a |\n\n## Later\n\ny\n")
     assert kept_psplib_section(out) == ["", "## PSPLIB — projects", "", "| a |", ""]
     assert kept_psplib_section(tmp_path / "none.md") == []
+
+
+def test_rg300_files_form_a_set_with_their_reference_values():
+    assert [_psplib_set(n) for n in ("j301_1", "j1201_3", "RG300_5", "pat1", "x1")] == \
+        ["J30", "J120", "RG300", "Patterson", "other"]
+    assert "RG300" in PSPLIB_SETS
+    optima = read_optima(PSPLIB / "optima.csv")
+    shipped = sorted(p.stem for p in PSPLIB.glob("RG300_*.rcp"))
+    assert shipped == [f"RG300_{n}" for n in range(1, 6)] and all(n in optima for n in shipped)
+    assert all(low <= up for low, up in optima.values())

@@ -231,6 +231,49 @@ def test_a_patterson_file_is_read_and_activities_without_demand_wait_for_nothing
     assert check_schedule(inst, res.schedule) == []
 
 
+def _rcp_table(path):
+    """The jobs of a Patterson file, read here independently of the importer (its numbers
+    in order, whatever the line breaks): capacities, {job: (duration, demands, successors)}."""
+    v = [int(x) for x in path.read_text().split()]
+    n, k = v[0], 2 + v[1]
+    rows = {}
+    for job in range(1, n + 1):
+        count = v[k + 1 + v[1]]
+        rows[job] = (v[k], v[k + 1:k + 1 + v[1]], v[k + 2 + v[1]:k + 2 + v[1] + count])
+        k += 2 + v[1] + count
+    assert k == len(v)
+    return v[2:2 + v[1]], rows
+
+
+def test_an_rg300_file_is_read_exactly():
+    """RanGen's 300 activities in the Patterson format, successor lists wrapped over lines."""
+    path = PSPLIB / "RG300_1.rcp"
+    inst = import_psplib(path)
+    capacity, rows = _rcp_table(path)
+    assert capacity == [10, 10, 10, 10] and len(rows) == 302
+    assert inst.name == "RG300_1" and inst.num_robots == 40 and inst.num_tasks == 300
+    assert [t.id for t in inst.tasks] == [f"job{n}" for n in range(2, 302)]  # source and sink dropped
+    for t in inst.tasks:
+        duration, demands, _ = rows[int(t.id[3:])]
+        assert t.duration == duration
+        assert dict(t.requires) == {f"R{k + 1}": float(d) for k, d in enumerate(demands) if d}
+        assert set(t.after) == {f"job{a}" for a, (_, _, s) in rows.items() if int(t.id[3:]) in s and a != 1}
+    by_id = {t.id: t for t in inst.tasks}  # rows read by eye: line 3 (job 2, 33 successors on three lines), the last
+    assert by_id["job2"].duration == 3 and by_id["job2"].requires == (("R2", 1.0),) and by_id["job2"].after == ()
+    assert "job2" in by_id["job60"].after and "job2" in by_id["job293"].after and "job2" not in by_id["job33"].after
+    assert by_id["job301"].duration == 8 and by_id["job301"].requires == (("R2", 3.0),)
+
+
+def test_a_bad_number_on_a_wrapped_patterson_line_names_that_line(tmp_path):
+    text = (PSPLIB / "RG300_1.rcp").read_text().splitlines()
+    assert text[3].split()[0] == "22"  # the second line of job 2's successors
+    text[3] = text[3].replace("22", "2x", 1)
+    path = tmp_path / "bad.rcp"
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(InstanceError, match=re.escape("bad.rcp line 4: expected integers")):
+        import_psplib(path)
+
+
 SM_BAD = [
     (lambda t: t.replace("  2      1     8       4    0    0    0", "  2      1     8       4    0    x    0"),
      "line 56: expected integers"),
