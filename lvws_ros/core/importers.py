@@ -1,6 +1,6 @@
 """Importers for the files users already have, into ``lvws-instance/1`` (formats.md,
 "Importing"): the multi-skill project scheduling (MSPSP) instances of the MiniZinc data
-format, the resource-constrained project scheduling (RCPSP) instances of PSPLIB (its
+format (two layouts), the resource-constrained project scheduling (RCPSP) instances of PSPLIB (its
 ``.sm`` and the Patterson ``.rcp`` formats), a plain CSV of robots and one of tasks, and
 the coalition benchmarks of DCMRTA / CTAS-D (YAML documents, read by the caller with a
 safe loader: :func:`dcmrta_instance`).
@@ -136,13 +136,20 @@ def _table(data: dict[str, Any], key: str, where: str, rows: int, cols: int, kin
 
 
 def import_mspsp(path: str | Path) -> Instance:
-    """An MSPSP instance (the MiniZinc data files of the multi-skill project scheduling
-    benchmarks: ``nActs``, ``dur``, ``nSkills``, ``sreq``, ``nResources``, ``mastery``,
-    ``pred``/``succ``) as traits with roles, exactly: each resource is a robot with amount 1
-    of each skill it masters, each activity a task requiring ``sreq`` units of each skill,
-    and with roles each member fills one skill slot. Activities without duration (the
-    source and sink, and any other: they hold no worker for any time) are dropped, their
-    precedences kept through them."""
+    """An MSPSP instance (multi-skill project scheduling, MiniZinc data) as traits,
+    exactly, in either of two layouts, told apart by their names:
+
+    * the MSPSP benchmark library's (``nActs``, ``dur``, ``nSkills``, ``sreq``,
+      ``nResources``, ``mastery``, ``pred``/``succ``): each resource a robot ``res<r>``
+      with amount 1 of each skill it masters, each activity a task ``act<a>`` requiring
+      ``sreq`` units of each skill, with roles (each member fills one skill slot);
+    * the MiniZinc benchmarks' (``mspsp.mzn``: ``n_skills``, ``n_workers``, ``has_skills``,
+      ``n_tasks``, ``d``, ``rr``, ``suc``): each worker a robot ``worker<j>`` with amount 1
+      of each skill it has, each task a task ``task<i>`` requiring ``rr`` units of each
+      skill, without roles (that model counts a worker toward every skill it has).
+
+    Activities without duration (the source and sink, and any other: they hold no worker
+    for any time) are dropped, their precedences kept through them."""
     p = Path(path)
     where = str(p)
     try:
@@ -150,37 +157,100 @@ def import_mspsp(path: str | Path) -> Instance:
     except (OSError, UnicodeDecodeError) as exc:
         raise InstanceError(f"{where}: cannot read the MSPSP file: {exc}") from None
     data = parse_dzn(text, where)
-    for key in ("nActs", "nSkills", "nResources"):
-        if not isinstance(data.get(key), int) or isinstance(data.get(key), bool) or data[key] < 0:
-            raise InstanceError(f"{where}: {key} must be a non-negative integer")
-    n_acts, n_skills, n_res = data["nActs"], data["nSkills"], data["nResources"]
+    project = _minizinc_mspsp(data, where) if "n_tasks" in data else _library_mspsp(data, where)
+    keep = [a for a in range(len(project.duration)) if project.duration[a] > 0]
+    for a in keep:
+        if not any(project.demand[a]):
+            raise InstanceError(f"{where}: {project.noun} {a + 1} lasts {project.duration[a]} but needs no worker: "
+                                "lvws schedules tasks done by subteams")
+    kept_before = _kept_before(project.before, set(keep))
+    skills = [f"skill{s + 1}" for s in range(project.n_skills)]
+    robots = tuple(Robot(f"{project.worker}{r + 1}", (), 0.0,
+                         traits=tuple((skills[s], 1.0) for s in range(len(skills)) if has[s]))
+                   for r, has in enumerate(project.mastery))
+    tasks = tuple(Task(f"{project.act}{a + 1}", (), 0.0, float(project.duration[a]),
+                       tuple(f"{project.act}{q + 1}" for q in sorted(kept_before(a))),
+                       requires=tuple((skills[s], float(n)) for s, n in enumerate(project.demand[a]) if n))
+                  for a in keep)
+    try:
+        return Instance(p.stem, (), robots, tasks, traits=tuple(skills), roles=project.roles)
+    except InstanceError as exc:
+        raise InstanceError(f"{where}: {exc}") from None
+
+
+@dataclass
+class _Skilled:
+    """A multi-skill project as read (0-based): per activity its duration, the workers it
+    needs of each skill and the activities it waits for; per worker the skills it has."""
+
+    n_skills: int
+    duration: list[int]
+    demand: list[list[int]]
+    before: dict[int, set[int]]
+    mastery: list[list[bool]]
+    roles: bool
+    act: str  # the prefix of task ids
+    noun: str  # an activity, in messages
+    worker: str  # the prefix of robot ids
+
+
+def _count(data: dict[str, Any], key: str, where: str) -> int:
+    value = data.get(key)
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        raise InstanceError(f"{where}: {key} must be a non-negative integer")
+    return value
+
+
+def _library_mspsp(data: dict[str, Any], where: str) -> _Skilled:
+    """The MSPSP benchmark library's layout (:func:`import_mspsp`)."""
+    n_acts, n_skills, n_res = (_count(data, key, where) for key in ("nActs", "nSkills", "nResources"))
     dur = _ints(data, "dur", where, n_acts)
     sreq = _table(data, "sreq", where, n_acts, n_skills, int)
     mastery = _table(data, "mastery", where, n_res, n_skills, bool)
     pred, succ = _ints(data, "pred", where), _ints(data, "succ", where, len(_ints(data, "pred", where)))
-    skills = [f"skill{s + 1}" for s in range(n_skills)]
-    keep = [a for a in range(n_acts) if dur[a] > 0]
-    for a in keep:
-        if not any(sreq[a]):
-            raise InstanceError(f"{where}: activity {a + 1} lasts {dur[a]} but needs no worker: lvws schedules "
-                                "tasks done by subteams")
     before: dict[int, set[int]] = {a: set() for a in range(n_acts)}
     for n, (a, b) in enumerate(zip(pred, succ, strict=True)):
         if not (1 <= a <= n_acts and 1 <= b <= n_acts):
             raise InstanceError(f"{where}: precedence {n + 1} ({a} -> {b}) names an activity outside 1..{n_acts}")
         before[b - 1].add(a - 1)
-    kept_before = _kept_before(before, set(keep))
-    robots = tuple(Robot(f"res{r + 1}", (), 0.0, traits=tuple((skills[s], 1.0) for s in range(n_skills)
-                                                               if mastery[r][s]))
-                   for r in range(n_res))
-    tasks = tuple(Task(f"act{a + 1}", (), 0.0, float(dur[a]),
-                       tuple(f"act{q + 1}" for q in sorted(kept_before(a))),
-                       requires=tuple((skills[s], float(sreq[a][s])) for s in range(n_skills) if sreq[a][s]))
-                  for a in keep)
-    try:
-        return Instance(p.stem, (), robots, tasks, traits=tuple(skills), roles=True)
-    except InstanceError as exc:
-        raise InstanceError(f"{where}: {exc}") from None
+    return _Skilled(n_skills, dur, sreq, before, mastery, True, "act", "activity", "res")
+
+
+def _sets(data: dict[str, Any], key: str, where: str, length: int, top: int, what: str) -> list[set[int]]:
+    """``key`` as ``length`` sets of integers in 1..``top`` (``what`` they name)."""
+    value = data.get(key)
+    if not isinstance(value, list) or not all(isinstance(v, list) for v in value):
+        raise InstanceError(f"{where}: {key} must be an array of sets of {what}s")
+    if len(value) != length:
+        raise InstanceError(f"{where}: {key} has {len(value)} entries, expected {length}")
+    for n, items in enumerate(value):
+        for v in items:
+            if not isinstance(v, int) or isinstance(v, bool) or not 1 <= v <= top:
+                raise InstanceError(f"{where}: {key}[{n + 1}] names {what} {v!r}, outside 1..{top}")
+    return [set(items) for items in value]
+
+
+def _minizinc_mspsp(data: dict[str, Any], where: str) -> _Skilled:
+    """The MiniZinc benchmarks' layout (``mspsp.mzn``; :func:`import_mspsp`)."""
+    n_skills, n_workers, n_tasks = (_count(data, key, where) for key in ("n_skills", "n_workers", "n_tasks"))
+    has = _sets(data, "has_skills", where, n_workers, n_skills, "skill")
+    dur = _ints(data, "d", where, n_tasks)
+    rr = _table(data, "rr", where, n_skills, n_tasks, int)
+    suc = _sets(data, "suc", where, n_tasks, n_tasks, "task")
+    for i, v in enumerate(dur):
+        if v < 0:
+            raise InstanceError(f"{where}: d[{i + 1}] is {v}, expected a duration >= 0")
+    for k, row in enumerate(rr):
+        for i, v in enumerate(row):
+            if v < 0:
+                raise InstanceError(f"{where}: rr[{k + 1}, {i + 1}] is {v}, expected a number of workers >= 0")
+    before: dict[int, set[int]] = {i: set() for i in range(n_tasks)}
+    for i, later in enumerate(suc):
+        for j in later:
+            before[j - 1].add(i)
+    demand = [[rr[k][i] for k in range(n_skills)] for i in range(n_tasks)]
+    mastery = [[s + 1 in h for s in range(n_skills)] for h in has]
+    return _Skilled(n_skills, dur, demand, before, mastery, False, "task", "task", "worker")
 
 
 def _kept_before(before: dict[int, set[int]], kept: set[int]) -> Callable[[int], set[int]]:

@@ -98,6 +98,73 @@ def test_an_activity_without_duration_is_dropped_and_its_precedences_kept(tmp_pa
     assert inst.tasks[inst.task_index["act5"]].after == ()  # act2 came after the source only
 
 
+# The MiniZinc benchmarks' layout (mspsp.mzn), written for this test: worker 1 has both
+# skills and, as that model counts a worker toward every skill it has, covers task 1 (one
+# of each skill) alone, beside workers 2 and 3 on tasks 2 and 3: 2 in all (with roles, 4).
+# Task 4 lasts 0: dropped, task 5 still after task 1 through it.
+MZN_MSPSP = """n_skills = 2;
+n_workers = 3;
+has_skills = [{1, 2}, {1}, {2}];
+n_tasks = 5;
+d = [2, 2, 2, 0, 1];
+rr = [| 1, 1, 0, 1, 1
+      | 1, 0, 1, 0, 0 |];
+suc = [{4}, {}, {}, {5}, {}];
+"""
+MSPSP_DIR = ROOT / "examples" / "mspsp"
+
+
+def test_the_minizinc_benchmarks_layout_is_read_exactly_without_roles(tmp_path):
+    path = tmp_path / "tiny.dzn"
+    path.write_text(MZN_MSPSP)
+    inst = import_mspsp(path)
+    assert inst.traits == ("skill1", "skill2") and not inst.task_roles.any()
+    assert [r.id for r in inst.robots] == ["worker1", "worker2", "worker3"]
+    assert [dict(r.traits) for r in inst.robots] == [{"skill1": 1.0, "skill2": 1.0}, {"skill1": 1.0}, {"skill2": 1.0}]
+    assert [t.id for t in inst.tasks] == ["task1", "task2", "task3", "task5"]
+    assert inst.tasks[0].requires == (("skill1", 1.0), ("skill2", 1.0))
+    assert inst.tasks[inst.task_index["task5"]].after == ("task1",)
+    res = solve_exact(inst, workers=2, time_limit=20)
+    assert res.proven and res.makespan == pytest.approx(3.0)  # tasks 1-3 at once, then task 5
+    assert check_schedule(inst, res.schedule) == []
+
+
+def test_a_minizinc_benchmark_file_by_eye_and_its_published_optimum():
+    inst = import_mspsp(MSPSP_DIR / "easy_01.dzn")
+    assert inst.num_robots == 9 and inst.num_tasks == 20 and len(inst.traits) == 5
+    by_id = {t.id: t for t in inst.tasks}
+    assert by_id["task1"].duration == 4  # d[1]; rr's first column: skills 1, 4, 5
+    assert by_id["task1"].requires == (("skill1", 1.0), ("skill4", 1.0), ("skill5", 1.0))
+    assert by_id["task9"].requires == (("skill1", 1.0), ("skill2", 2.0))
+    assert by_id["task6"].after == ("task1",) and by_id["task5"].after == ("task2", "task4")
+    assert dict(inst.robots[3].traits) == {"skill2": 1.0, "skill4": 1.0, "skill5": 1.0}  # has_skills[4] = {2, 4, 5}
+    medium = import_mspsp(MSPSP_DIR / "medium_05.dzn")  # MiniZinc Challenge 2012: 18, proven
+    res = solve_exact(medium, workers=2, time_limit=20)
+    assert res.proven and res.makespan == pytest.approx(18.0)  # with roles it would be 27
+
+
+@pytest.mark.parametrize("edit,message", [
+    (lambda t: t.replace("suc = [{4}, {}", "suc = [{4}, {9}"), "suc[2] names task 9, outside 1..5"),
+    (lambda t: t.replace("{1, 2}, {1}", "{1, 3}, {1}"), "has_skills[1] names skill 3, outside 1..2"),
+    (lambda t: t.replace("[{1, 2}, {1}, {2}]", "[1, 2, 3]"), "has_skills must be an array of sets of skills"),
+    (lambda t: t.replace("d = [2, 2, 2, 0, 1]", "d = [2, 2, 2, 0]"), "d has 4 entries, expected 5"),
+    (lambda t: t.replace("d = [2, 2, 2, 0, 1]", "d = [2, -2, 2, 0, 1]"), "d[2] is -2, expected a duration >= 0"),
+    (lambda t: t.replace("| 1, 0, 1, 0, 0 |]", "| 1, 0, 1, 0 |]"), "rr must be a 2 x 5 table of ints"),
+    (lambda t: t.replace("| 1, 0, 1, 0, 0 |]", "| 1, 0, -1, 0, 0 |]"), "rr[2, 3] is -1"),
+    (lambda t: t.replace("n_workers = 3;", "n_workers = true;"), "n_workers must be a non-negative integer"),
+    (lambda t: t.replace("[| 1, 1, 0, 1, 1", "[| 1, 1, 0, 1, 0").replace("| 1, 0, 1, 0, 0 |]", "| 1, 0, 1, 0, 0 |]"),
+     "task 5 lasts 1 but needs no worker"),
+    (lambda t: t.replace("| 1, 0, 1, 0, 0 |]", "| 1, 0, 3, 0, 0 |]"), "'task3' can never be covered"),
+    (lambda t: t.replace("{1, 2}, {1}", "{1, 2, {1}"), "line 3"),
+])
+def test_bad_minizinc_benchmark_files_name_the_item(tmp_path, edit, message):
+    path = tmp_path / "bad.dzn"
+    path.write_text(edit(MZN_MSPSP))
+    with pytest.raises(InstanceError, match=re.escape(message)) as info:
+        import_mspsp(path)
+    assert str(path) in str(info.value)
+
+
 def test_the_datazinc_reader_takes_values_not_code():
     data = parse_dzn("a = 1; % note\nb = [| true, false | false, true |];\nc = {1, 2};\nd = [];", "x.dzn")
     assert data == {"a": 1, "b": [[True, False], [False, True]], "c": [1, 2], "d": []}
