@@ -125,7 +125,7 @@ def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
     if not len(need):
         return True
     if len(a) <= SMALL_ROLE_TEAM:
-        return _role_cover_small(a.tolist(), need.tolist())
+        return _role_cover_small_memo(a.tolist(), need.tolist())
     if _role_cover_greedy(a, need):  # an assignment found at once: no search needed
         return True
     a = a[np.lexsort((*a.T[::-1], (a > 0).sum(axis=1)))]  # fewest traits first; identical rows adjacent
@@ -159,6 +159,20 @@ def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
 
 
 SMALL_ROLE_TEAM = 12  # role_cover: up to this many members, a search in plain Python (no array per node)
+ROLE_MEMO_SIZE = 1 << 16  # role_cover: answers kept for small teams (then forgotten all at once)
+_role_memo: dict[tuple[tuple[tuple[float, ...], ...], tuple[float, ...]], bool] = {}
+
+
+def _role_cover_small_memo(a: list[list[float]], need: list[float]) -> bool:
+    """:func:`_role_cover_small`, its answer kept for the same members (in any order) and
+    needs: GRP asks again about the teams it grows and trims, task after task."""
+    key = (tuple(sorted(map(tuple, a))), tuple(need))
+    got = _role_memo.get(key)
+    if got is None:
+        if len(_role_memo) >= ROLE_MEMO_SIZE:
+            _role_memo.clear()
+        got = _role_memo[key] = _role_cover_small(a, need)
+    return got
 
 
 def _role_cover_greedy(a: FloatArray, need: FloatArray) -> bool:
@@ -180,8 +194,11 @@ def _role_cover_greedy(a: FloatArray, need: FloatArray) -> bool:
 def _role_cover_small(a: list[list[float]], need: list[float]) -> bool:
     """:func:`role_cover` for a few members (rows ``a``, the needed traits only): the same
     depth-first search in plain floats, pruned by what the members left can bring to each
-    trait and memoised on (member, what is left)."""
+    trait and by their number (one per trait still short), memoised on (member, what is
+    left)."""
     n, k = len(a), len(need)
+    if n < k:  # every needed trait takes a member of its own
+        return False
     rest = [[0.0] * k for _ in range(n + 1)]  # what members i.. bring to each trait
     for i in range(n - 1, -1, -1):
         rest[i] = [rest[i + 1][c] + a[i][c] for c in range(k)]
@@ -190,7 +207,8 @@ def _role_cover_small(a: list[list[float]], need: list[float]) -> bool:
     def search(i: int, left: tuple[float, ...]) -> bool:
         if all(x <= TOLERANCE for x in left):
             return True
-        if i == n or any(left[c] > rest[i][c] + TOLERANCE for c in range(k)):
+        if i == n or any(left[c] > rest[i][c] + TOLERANCE for c in range(k)) or \
+                sum(x > TOLERANCE for x in left) > n - i:  # a member per trait still short
             return False
         key = (i, tuple(round(x, 9) for x in left))
         if key in seen:
@@ -297,6 +315,14 @@ def grow(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_p
     missing alone, else the heaviest one; "ascending": the lightest robots first. With
     ``roles``, what the members lack once each counts toward one trait is filled the same
     way. O(n t K)."""
+    team = _grow_traits(caps, payloads, need_caps, start, order, roles)
+    return None if team is None else _fill_payload(payloads, need_caps, need_payload, team, fill)
+
+
+def _grow_traits(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, start: Sequence[int],
+                 order: IntArray | None, roles: bool) -> list[int] | None:
+    """:func:`grow`'s first part: ``start`` and the robots added until the traits
+    (capabilities) are covered, or None when all of them cannot cover them."""
     n = len(caps)
     rank = np.empty(n, dtype=np.int64)
     rank[np.argsort(payloads, kind="stable") if order is None else order] = np.arange(n)
@@ -319,15 +345,23 @@ def grow(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_p
         if best <= 0 and roles:  # what the members lack may come from a new assignment: every helper joins
             team += [int(i) for i in np.flatnonzero(~used & helps(amounts, need[None, :], np.zeros(1))[:, 0])]
             used[team] = True
-            if lacking().any():
-                return None
-            break
+            return None if lacking().any() else team
         if best <= 0:
             return None
         pick = int(np.flatnonzero(gain == best)[np.argmin(rank[gain == best])])
         team.append(pick)
         used[pick] = True
         missing = lacking()
+    return team
+
+
+def _fill_payload(payloads: FloatArray, need_caps: AmountArray, need_payload: float, start: list[int],
+                  fill: str) -> list[int] | None:
+    """:func:`grow`'s second part: robots added to ``start`` (a team covering the
+    traits) by ``fill`` until the payloads add up, or None when all of them fall short."""
+    team = list(start)
+    used = np.zeros(len(payloads), dtype=bool)
+    used[team] = True
     short = float(shortfall(need_caps, payloads[team].sum(), need_caps, need_payload)[1])
     while short > 0:
         if used.all():
@@ -376,13 +410,16 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
         for c in np.flatnonzero(holds.any(axis=0)):
             holders = np.flatnonzero(holds[:, c])
             seeds.append(int(holders[np.argmin(payloads[holders])]))
+    pruned: dict[tuple[int, ...], list[int]] = {}  # a team grown twice is pruned once
     for seed in dict.fromkeys(seeds):
-        for fill in ("single", "ascending"):
-            team = grow(caps, payloads, need_caps, need_payload, () if seed is None else (seed,), fill=fill,
-                        roles=roles)
+        core = _grow_traits(caps, payloads, need_caps, () if seed is None else (seed,), None, roles)
+        for fill in ("single", "ascending"):  # grow's two payload fills, on the one trait cover
+            team = None if core is None else _fill_payload(payloads, need_caps, need_payload, core, fill)
             if team is not None:
-                options.append(prune(sorted(team, key=heaviest_first.index), caps, payloads, need_caps, need_payload,
-                                     roles=roles))
+                key = tuple(sorted(team, key=heaviest_first.index))
+                if key not in pruned:
+                    pruned[key] = prune(list(key), caps, payloads, need_caps, need_payload, roles=roles)
+                options.append(pruned[key])
     if traits_from is None:
         best = min(options, key=lambda t: (float(payloads[t].sum()), len(t), sorted(t)))
         return tuple(sorted(best))

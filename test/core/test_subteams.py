@@ -163,3 +163,27 @@ def test_the_role_rule_is_the_same_whichever_search_decides_it(n, k, seed):
                     for pick in itertools.product(range(-1, k), repeat=n))
         got.append(brute)
     assert len(set(got)) == 1, (caps.tolist(), need.tolist(), got)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(1, 7), st.integers(1, 4), st.integers(0, 2**32 - 1))
+def test_the_role_rule_kept_for_a_team_is_the_searched_one_in_any_order(n, k, seed):
+    """The answer kept for a small team (GRP asks again about the teams it grows and
+    trims) is the one a fresh search gives for its members in any order."""
+    from lvws_ros.core import subteams
+
+    rng = np.random.default_rng(seed)
+    caps = np.round(rng.random((n, k)) * 4, 1) * (rng.random((n, k)) < 0.6)
+    need = np.round(rng.random(k) * 6, 1) * (rng.random(k) < 0.8)
+    subteams._role_memo.clear()
+    first = subteams.role_cover(caps, need)
+    for _ in range(3):
+        perm = rng.permutation(n)
+        assert subteams.role_cover(caps[perm], need) == first  # kept
+        subteams._role_memo.clear()
+        assert subteams.role_cover(caps[perm], need) == first  # searched again
+    if n <= 6:  # every assignment of each member to one trait or none
+        import itertools
+        brute = any(all(sum(caps[i, c] for i in range(n) if pick[i] == c) >= need[c] - 1e-6 for c in range(k))
+                    for pick in itertools.product(range(-1, k), repeat=n))
+        assert first == brute, (caps.tolist(), need.tolist())
