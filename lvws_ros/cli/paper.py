@@ -560,8 +560,8 @@ def psplib_table(rows: Sequence[PsplibRow], time_limit: float, workers: int, sec
         "identical robots and task, one cumulative per pool), the plain model is one cumulative per resource "
         "with constant demands, as PyJobShop builds it; `auto` is the product's default policy, the planner "
         f"(`lvws solve --policy auto --time-limit {time_limit:g}`: its makespan is the executed schedule's, its "
-        "seconds the whole run's). Published optima and best-known makespans: PSPLIB; for RG300, the best "
-        "of two published 600 s solver runs (`examples/psplib/optima.csv`, `examples/psplib/README.md`). "
+        "seconds the whole run's). Published optima and best-known makespans: PSPLIB; for RG300, a published 600 s "
+        "run of IBM CP Optimizer, a reference (`examples/psplib/optima.csv`, `examples/psplib/README.md`). "
         "`*`: proven optimal.",
         "",
         "| instance | robots | tasks | optimum (lower..best known) | GRP | exact, pool model | s "
