@@ -119,6 +119,8 @@ def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
     fast for subteams of tens of robots."""
     caps = np.atleast_2d(np.asarray(caps, dtype=np.float64))
     need_all = np.asarray(need_caps, dtype=np.float64)
+    if len(caps) <= SMALL_ROLE_TEAM:
+        return _role_cover_small_memo(caps.tolist(), need_all.tolist())
     cols = np.flatnonzero(need_all > TOLERANCE)
     a, need = caps[:, cols], need_all[cols]
     a = a[(a > 0).any(axis=1)]
@@ -164,14 +166,18 @@ _role_memo: dict[tuple[tuple[tuple[float, ...], ...], tuple[float, ...]], bool] 
 
 
 def _role_cover_small_memo(a: list[list[float]], need: list[float]) -> bool:
-    """:func:`_role_cover_small`, its answer kept for the same members (in any order) and
-    needs: GRP asks again about the teams it grows and trims, task after task."""
+    """:func:`role_cover` for a few members (rows ``a`` over all traits) by
+    :func:`_role_cover_small` on the needed traits and the members holding one, its answer
+    kept for the same members (in any order) and needs: GRP asks again about the teams it
+    grows and trims, task after task."""
     key = (tuple(sorted(map(tuple, a))), tuple(need))
     got = _role_memo.get(key)
     if got is None:
         if len(_role_memo) >= ROLE_MEMO_SIZE:
             _role_memo.clear()
-        got = _role_memo[key] = _role_cover_small(a, need)
+        cols = [c for c, w in enumerate(need) if w > TOLERANCE]
+        rows = [[row[c] for c in cols] for row in a if any(row[c] > 0 for c in cols)]
+        got = _role_memo[key] = not cols or _role_cover_small(rows, [need[c] for c in cols])
     return got
 
 
@@ -359,6 +365,8 @@ def _fill_payload(payloads: FloatArray, need_caps: AmountArray, need_payload: fl
                   fill: str) -> list[int] | None:
     """:func:`grow`'s second part: robots added to ``start`` (a team covering the
     traits) by ``fill`` until the payloads add up, or None when all of them fall short."""
+    if fill == "ascending":
+        return _fill_ascending(payloads, need_payload, start)
     team = list(start)
     used = np.zeros(len(payloads), dtype=bool)
     used[team] = True
@@ -368,12 +376,31 @@ def _fill_payload(payloads: FloatArray, need_caps: AmountArray, need_payload: fl
             return None
         fills = ~used & (payloads >= short - TOLERANCE)
         pool = np.flatnonzero(fills) if fills.any() and fill == "single" else np.flatnonzero(~used)
-        lightest = fill == "ascending" or fills.any()
-        pick = int(pool[np.argmin(payloads[pool])] if lightest else pool[np.argmax(payloads[pool])])
+        pick = int(pool[np.argmin(payloads[pool])] if fills.any() else pool[np.argmax(payloads[pool])])
         team.append(pick)
         used[pick] = True
         short = float(shortfall(need_caps, payloads[team].sum(), need_caps, need_payload)[1])
     return team
+
+
+FILL_BLOCK = 8  # _fill_ascending: team sizes tried at once
+
+
+def _fill_ascending(payloads: FloatArray, need_payload: float, start: list[int]) -> list[int] | None:
+    """:func:`grow`'s "ascending" payload fill: the robots not in ``start``, lightest
+    first (lower index on ties), join one by one until the payloads add up. The sums of
+    the teams in turn (each as the team's own sum) are tested a block at a time."""
+    others = np.ones(len(payloads), dtype=bool)
+    others[start] = False
+    rest = np.flatnonzero(others)
+    seq = np.concatenate([np.asarray(start, dtype=np.int64), rest[np.argsort(payloads[rest], kind="stable")]])
+    for lo in range(len(start), len(seq) + 1, FILL_BLOCK):
+        sizes = range(lo, min(lo + FILL_BLOCK, len(seq) + 1))
+        short = shortfall(0.0, np.array([payloads[seq[:j]].sum() for j in sizes]), 0.0, need_payload)[1]
+        done = np.flatnonzero(~(short > 0))
+        if len(done):
+            return [int(i) for i in seq[:sizes[int(done[0])]]]
+    return None
 
 
 def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,

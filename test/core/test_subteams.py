@@ -187,3 +187,28 @@ def test_the_role_rule_kept_for_a_team_is_the_searched_one_in_any_order(n, k, se
         brute = any(all(sum(caps[i, c] for i in range(n) if pick[i] == c) >= need[c] - 1e-6 for c in range(k))
                     for pick in itertools.product(range(-1, k), repeat=n))
         assert first == brute, (caps.tolist(), need.tolist())
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(payloads=st.lists(st.sampled_from([0.0, 0.1, 0.2, 0.3, 0.5, 1.0, 2.5, 4.0]), min_size=1, max_size=24),
+       need=st.sampled_from([0.0, 0.3, 0.6, 1.0, 2.9, 7.5, 20.0, 100.0]), data=st.data())
+def test_the_ascending_payload_fill_adds_the_lightest_robots_one_by_one(payloads, need, data):
+    """grow's "ascending" fill (tested a block of team sizes at a time) against its
+    definition: from the start team, the lightest robot not in the team (lower index on
+    ties) joins until the team's own sum reaches the need; None when all fall short."""
+    from lvws_ros.core.subteams import TOLERANCE, grow
+
+    pay = np.array(payloads)
+    n = len(pay)
+    start = data.draw(st.lists(st.integers(0, n - 1), unique=True, max_size=3))
+    team, got = list(start), None
+    while True:
+        if pay[team].sum() >= need - TOLERANCE:
+            got = team
+            break
+        rest = [i for i in range(n) if i not in team]
+        if not rest:
+            break
+        team = [*team, min(rest, key=lambda i: (pay[i], i))]
+    caps = np.ones((n, 1))
+    assert grow(caps, pay, np.zeros(1), need, start, fill="ascending") == got  # no trait needed
