@@ -168,16 +168,16 @@ _role_memo: dict[tuple[tuple[tuple[float, ...], ...], tuple[float, ...]], bool] 
 def _role_cover_small_memo(a: list[list[float]], need: list[float]) -> bool:
     """:func:`role_cover` for a few members (rows ``a`` over all traits) by
     :func:`_role_cover_small` on the needed traits and the members holding one, its answer
-    kept for the same members (in any order) and needs: GRP asks again about the teams it
-    grows and trims, task after task."""
-    key = (tuple(sorted(map(tuple, a))), tuple(need))
+    kept for the same such members (in any order) and needs: GRP asks again about the
+    teams it grows and trims, task after task."""
+    cols = [c for c, w in enumerate(need) if w > TOLERANCE]
+    rows = [[row[c] for c in cols] for row in a if any(row[c] > 0 for c in cols)]
+    key = (tuple(sorted(map(tuple, rows))), tuple(need[c] for c in cols))
     got = _role_memo.get(key)
     if got is None:
         if len(_role_memo) >= ROLE_MEMO_SIZE:
             _role_memo.clear()
-        cols = [c for c, w in enumerate(need) if w > TOLERANCE]
-        rows = [[row[c] for c in cols] for row in a if any(row[c] > 0 for c in cols)]
-        got = _role_memo[key] = not cols or _role_cover_small(rows, [need[c] for c in cols])
+        got = _role_memo[key] = not cols or _role_cover_small(rows, list(key[1]))
     return got
 
 
@@ -354,7 +354,8 @@ def _grow_traits(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray
             return None if lacking().any() else team
         if best <= 0:
             return None
-        pick = int(np.flatnonzero(gain == best)[np.argmin(rank[gain == best])])
+        tie = gain == best
+        pick = int(np.flatnonzero(tie)[np.argmin(rank[tie])])
         team.append(pick)
         used[pick] = True
         missing = lacking()
@@ -365,12 +366,14 @@ def _fill_payload(payloads: FloatArray, need_caps: AmountArray, need_payload: fl
                   fill: str) -> list[int] | None:
     """:func:`grow`'s second part: robots added to ``start`` (a team covering the
     traits) by ``fill`` until the payloads add up, or None when all of them fall short."""
+    team = list(start)
+    short = float(shortfall(need_caps, payloads[team].sum(), need_caps, need_payload)[1])
+    if not short > 0:  # the payloads add up already
+        return team
     if fill == "ascending":
         return _fill_ascending(payloads, need_payload, start)
-    team = list(start)
     used = np.zeros(len(payloads), dtype=bool)
     used[team] = True
-    short = float(shortfall(need_caps, payloads[team].sum(), need_caps, need_payload)[1])
     while short > 0:
         if used.all():
             return None
@@ -428,7 +431,9 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
         options.append([min(alone, key=lambda i: (float(payloads[i]), i))])
     else:
         options += [[i] for i in alone]
-    heaviest_first = list(np.argsort(-payloads, kind="stable"))
+    place = np.empty(len(caps), dtype=np.int64)  # each robot's place, the heaviest first (lower index on ties)
+    place[np.argsort(-payloads, kind="stable")] = np.arange(len(caps))
+    heaviest_first = place.tolist()
     seeds: list[int | None] = [None]
     holds = (np.asarray(caps) > 0) & (np.asarray(need_caps) > TOLERANCE)[None, :]
     if len(caps) <= SEED_EVERY_HOLDER:  # every holder of a needed capability (trait)
@@ -438,15 +443,17 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
             holders = np.flatnonzero(holds[:, c])
             seeds.append(int(holders[np.argmin(payloads[holders])]))
     pruned: dict[tuple[int, ...], list[int]] = {}  # a team grown twice is pruned once
+    lightest_first = np.argsort(payloads, kind="stable")  # grow's default order, for every seed
     for seed in dict.fromkeys(seeds):
-        core = _grow_traits(caps, payloads, need_caps, () if seed is None else (seed,), None, roles)
+        core = _grow_traits(caps, payloads, need_caps, () if seed is None else (seed,), lightest_first, roles)
         for fill in ("single", "ascending"):  # grow's two payload fills, on the one trait cover
             team = None if core is None else _fill_payload(payloads, need_caps, need_payload, core, fill)
             if team is not None:
-                key = tuple(sorted(team, key=heaviest_first.index))
+                key = tuple(sorted(team, key=heaviest_first.__getitem__))
                 if key not in pruned:
                     pruned[key] = prune(list(key), caps, payloads, need_caps, need_payload, roles=roles)
                 options.append(pruned[key])
+    options = [list(t) for t in dict.fromkeys(tuple(t) for t in options)]  # each team (in its order) once
     if traits_from is None:
         best = min(options, key=lambda t: (float(payloads[t].sum()), len(t), sorted(t)))
         return tuple(sorted(best))
