@@ -74,14 +74,14 @@ class State:
         return self.robot_free_at <= self.time + TOLERANCE
 
     def free_robots(self) -> list[int]:
-        return [int(i) for i in np.flatnonzero(self.robot_available())]
+        return np.flatnonzero(self.robot_available()).tolist()
 
     def ready_tasks(self) -> list[int]:
-        return [int(j) for j in np.flatnonzero(self.task_status == TaskStatus.READY)]
+        return np.flatnonzero(self.task_status == TaskStatus.READY).tolist()
 
     def tasks_to_do(self) -> list[int]:
         """Tasks not started yet (queued or ready): what a schedule from here still places."""
-        return [int(j) for j in np.flatnonzero(self.task_status <= TaskStatus.READY)]
+        return np.flatnonzero(self.task_status <= TaskStatus.READY).tolist()
 
     def task_state_vectors(self) -> npt.NDArray[np.float32]:
         """s^t = [ready, assigned, incomplete] per task (section III-A)."""

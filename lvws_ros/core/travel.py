@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -61,13 +62,23 @@ class Travel:
         needs to reach task ``tasks[j]`` alone; inf when it can never do it (:meth:`time`,
         :meth:`can_do`)."""
         r, a, t = (np.asarray(x, dtype=np.int64).reshape(-1) for x in (robots, at, tasks))
-        speed = np.asarray(self.robot_speed, dtype=np.float64)[r][:, None]
-        meet = np.asarray(self.task_from, dtype=np.int64)[t]
-        moves = meet != np.asarray(self.task_to, dtype=np.int64)[t]
+        speeds, meets, ends = self._arrays
+        speed = speeds[r][:, None]
+        meet = meets[t]
+        moves = meet != ends[t]
         out = np.where(speed > 0, self.distance[np.ix_(a, meet)] / np.where(speed > 0, speed, 1.0), np.inf)
         out[a[:, None] == meet[None, :]] = 0.0  # already there
         out[(speed <= 0) & moves[None, :]] = np.inf  # a fixed robot never takes a task that moves its team
         return np.asarray(out, dtype=np.float64)
+
+    @cached_property
+    def _arrays(self) -> tuple[FloatArray, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """robot_speed, task_from and task_to as (read-only) arrays, made once."""
+        out = (np.array(self.robot_speed, dtype=np.float64), np.array(self.task_from, dtype=np.int64),
+               np.array(self.task_to, dtype=np.int64))
+        for x in out:
+            x.setflags(write=False)
+        return out
 
     def ways_home(self) -> FloatArray:
         """(N, M): seconds robot i needs from where task j ends to its :meth:`home` (inf:

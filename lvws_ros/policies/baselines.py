@@ -100,7 +100,7 @@ class _SequentialPolicy:
             rest = order[k + 1:]
             possible[k + 1:] = covered(inst.robot_amounts[free].sum(axis=0), inst.robot_payload[free].sum(),
                                        inst.task_needs[rest], inst.task_payload[rest])
-        return Decision(tuple(out), tuple(int(i) for i in free))
+        return Decision(tuple(out), tuple(free.tolist()))
 
 
 PRIORITIES = ("index", "critical-path")  # the order in which GRP takes the ready tasks
