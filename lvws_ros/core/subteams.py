@@ -161,7 +161,7 @@ def role_cover(caps: npt.ArrayLike, need_caps: npt.ArrayLike) -> bool:
 
 
 SMALL_ROLE_TEAM = 12  # role_cover: up to this many members, a search in plain Python (no array per node)
-ROLE_MEMO_SIZE = 1 << 16  # role_cover: answers kept for small teams (then forgotten all at once)
+ROLE_MEMO_SIZE = 1 << 14  # role_cover: answers kept for small teams (then forgotten all at once; about 12 MB)
 _role_memo: dict[tuple[tuple[tuple[float, ...], ...], tuple[float, ...]], bool] = {}
 
 
