@@ -145,8 +145,10 @@ def _amounts(values: Sequence[float], names: Sequence[str], where: str) -> None:
         _finite(v, f"{where}[{n}]")
 
 
-def check_team(snap: TeamSnapshot) -> None:
-    """InstanceError naming the TeamState field when the snapshot cannot be used."""
+def check_team(snap: TeamSnapshot, checked: TeamSnapshot | None = None) -> None:
+    """InstanceError naming the TeamState field when the snapshot cannot be used.
+    ``checked``: a snapshot that passed before; its robots that ``snap`` holds at the same
+    places (the very same objects, as an incremental reader keeps them) are not checked again."""
     _finite(snap.stamp, "TeamState header.stamp", high=math.inf)
     k = len(snap.capability_names)
     if (k < 1 and not snap.trait_names) or not snap.robots:
@@ -154,7 +156,10 @@ def check_team(snap: TeamSnapshot) -> None:
     ids = [r.id for r in snap.robots]
     if len(set(ids)) != len(ids):
         raise InstanceError(f"TeamState robots: duplicate ids {sorted({i for i in ids if ids.count(i) > 1})}")
-    for n, r in enumerate(snap.robots):
+    same = checked is not None and (checked.capability_names, checked.trait_names) == (snap.capability_names,
+                                                                                      snap.trait_names)
+    for n in _changed(snap.robots, checked.robots if same and checked is not None else ()):
+        r = snap.robots[n]
         where = f"TeamState robots[{n}] ({r.id!r})"
         if not r.id:
             raise InstanceError(f"TeamState robots[{n}].id: empty")
@@ -168,44 +173,70 @@ def check_team(snap: TeamSnapshot) -> None:
             raise InstanceError(f"{where}.speed: 0 (fixed) or at least {1 / MAX_VALUE:g}, got {r.speed!r}")
 
 
-def check_graph(snap: GraphSnapshot) -> None:
-    """InstanceError naming the TaskGraph field when the snapshot cannot be used."""
+def _changed(items: Sequence[Any], before: Sequence[Any]) -> list[int]:
+    """The places of ``items`` that do not hold the very object ``before`` holds there."""
+    if len(before) != len(items):
+        return list(range(len(items)))
+    return [n for n, (a, b) in enumerate(zip(items, before, strict=True)) if a is not b]
+
+
+def check_graph(snap: GraphSnapshot, checked: GraphSnapshot | None = None) -> None:
+    """InstanceError naming the TaskGraph field when the snapshot cannot be used.
+    ``checked``: a snapshot that passed before; with the same task ids, traits and sites,
+    its tasks that ``snap`` holds at the same places (the very same objects) are not
+    checked again."""
     _finite(snap.stamp, "TaskGraph header.stamp", high=math.inf)
     k = len(snap.capability_names)
     ids = {t.id for t in snap.tasks}
     if len(ids) != len(snap.tasks) or "" in ids:
         raise InstanceError("TaskGraph tasks: ids must be unique and non-empty")
-    for n, t in enumerate(snap.tasks):
-        where = f"TaskGraph tasks[{n}] ({t.id!r})"
-        if t.status not in _STATUSES:
-            raise InstanceError(f"{where}.status: {t.status} is not one of "
-                                + ", ".join(f"{s.name}={s.value}" for s in TaskStatus))
-        _bits(t.capabilities, k, f"{where}.capabilities")
-        _amounts(t.requires, snap.trait_names, f"{where}.requires")
-        if not any(t.capabilities) and not any(a > 0 for a in t.requires):
-            raise InstanceError(f"{where}.capabilities: needs at least one capability"
-                                + (" (or a trait in requires)" if snap.trait_names else ""))
-        if t.roles not in (0, 1, 2):
-            raise InstanceError(f"{where}.roles: 0 (the graph's), 1 (no) or 2 (yes), got {t.roles}")
-        _finite(t.payload, f"{where}.payload")
-        _finite(t.duration, f"{where}.duration")
-        if t.duration <= 0:
-            raise InstanceError(f"{where}.duration: must be > 0, got {t.duration!r}")
-        unknown = [p for p in t.prerequisites if p not in ids]
-        if unknown:
-            raise InstanceError(f"{where}.prerequisites: unknown task id(s) {unknown}")
-        for name, value in (("start_time", t.start), ("end_time", t.end)):
-            if value is not None:
-                _finite(value, f"{where}.{name}", high=math.inf)
+    if checked is not None and (checked.capability_names, checked.trait_names, checked.sites, checked.distances) \
+            == (snap.capability_names, snap.trait_names, snap.sites, snap.distances) \
+            and len(checked.tasks) == len(snap.tasks):
+        changed = _changed(snap.tasks, checked.tasks)
+        if any(snap.tasks[n].id != checked.tasks[n].id for n in changed):
+            changed = list(range(len(snap.tasks)))  # tasks came and went: every prerequisite looked up again
+        structure_same = all(snap.tasks[n].prerequisites == checked.tasks[n].prerequisites for n in changed)
+    else:
+        changed, structure_same = list(range(len(snap.tasks))), False
+    for n in changed:
+        _check_task(snap, n, k, ids)
     if snap.objective not in ("", *OBJECTIVES):
         raise InstanceError(f"TaskGraph objective: '', 'makespan' or 'return', got {snap.objective[:40]!r}")
-    _check_sites(snap)
-    _check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
+    _check_sites(snap, changed)
+    if not structure_same:
+        _check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
 
 
-def _check_sites(snap: GraphSnapshot) -> None:
+def _check_task(snap: GraphSnapshot, n: int, k: int, ids: set[str]) -> None:
+    t = snap.tasks[n]
+    where = f"TaskGraph tasks[{n}] ({t.id!r})"
+    if t.status not in _STATUSES:
+        raise InstanceError(f"{where}.status: {t.status} is not one of "
+                            + ", ".join(f"{s.name}={s.value}" for s in TaskStatus))
+    _bits(t.capabilities, k, f"{where}.capabilities")
+    _amounts(t.requires, snap.trait_names, f"{where}.requires")
+    if not any(t.capabilities) and not any(a > 0 for a in t.requires):
+        raise InstanceError(f"{where}.capabilities: needs at least one capability"
+                            + (" (or a trait in requires)" if snap.trait_names else ""))
+    if t.roles not in (0, 1, 2):
+        raise InstanceError(f"{where}.roles: 0 (the graph's), 1 (no) or 2 (yes), got {t.roles}")
+    _finite(t.payload, f"{where}.payload")
+    _finite(t.duration, f"{where}.duration")
+    if t.duration <= 0:
+        raise InstanceError(f"{where}.duration: must be > 0, got {t.duration!r}")
+    unknown = [p for p in t.prerequisites if p not in ids]
+    if unknown:
+        raise InstanceError(f"{where}.prerequisites: unknown task id(s) {unknown}")
+    for name, value in (("start_time", t.start), ("end_time", t.end)):
+        if value is not None:
+            _finite(value, f"{where}.{name}", high=math.inf)
+
+
+def _check_sites(snap: GraphSnapshot, tasks: Sequence[int] | None = None) -> None:
     """The travel part of a TaskGraph: unique named sites with finite coordinates, a
-    distance matrix of |sites|^2 entries or none, every task at known sites."""
+    distance matrix of |sites|^2 entries or none, every task (of ``tasks``, the places
+    to check; None: all) at known sites."""
     names = [s[0] for s in snap.sites]
     if len(set(names)) != len(names) or "" in names:
         raise InstanceError("TaskGraph sites: ids must be unique and non-empty")
@@ -221,7 +252,8 @@ def _check_sites(snap: GraphSnapshot) -> None:
     for n, d in enumerate(snap.distances):
         _finite(d, f"TaskGraph site_distances[{n}]")
     known = set(names)
-    for n, t in enumerate(snap.tasks):
+    for n in range(len(snap.tasks)) if tasks is None else tasks:
+        t = snap.tasks[n]
         for field_, value in (("site_from", t.site_from), ("site_to", t.site_to)):
             if value and value not in known:
                 raise InstanceError(f"TaskGraph tasks[{n}] ({t.id!r}).{field_}: unknown site {value!r}")
@@ -540,7 +572,7 @@ class OnlineScheduler:
 
     def offer_team(self, snap: TeamSnapshot) -> bool:
         """Take a team snapshot (InstanceError, snapshot ignored, when malformed)."""
-        check_team(snap)
+        check_team(snap, self.team)
         if not self._in_order("TeamState", self.team.stamp if self.team else None, snap.stamp):
             return False
         if self.team is not None:
@@ -555,7 +587,7 @@ class OnlineScheduler:
 
     def offer_graph(self, snap: GraphSnapshot) -> bool:
         """Take a task-graph snapshot (InstanceError, snapshot ignored, when malformed)."""
-        check_graph(snap)
+        check_graph(snap, self.graph)
         if not self._in_order("TaskGraph", self.graph.stamp if self.graph else None, snap.stamp):
             return False
         if self.graph is not None:

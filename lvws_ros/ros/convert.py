@@ -6,7 +6,9 @@ messages in the nodes and rosbags' deserialized messages in the bag reader alike
 
 from __future__ import annotations
 
+import array
 import math
+import operator
 from typing import Any
 
 from builtin_interfaces.msg import Duration, Time
@@ -29,9 +31,9 @@ from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskI
 from lvws_ros.errors import ConfigError
 from lvws_ros.sim.config import PART_PAYLOAD
 
-__all__ = ["cell_task_from_msg", "cell_task_to_msg", "decision_from_msg", "decision_to_msg", "from_time",
-           "goal_event_to_msg", "graph_from_msg", "graph_to_msg", "instance_task_from_msg", "instance_task_to_msg",
-           "team_from_msg", "team_to_msg", "to_duration", "to_time"]
+__all__ = ["GraphReader", "TeamReader", "cell_task_from_msg", "cell_task_to_msg", "decision_from_msg",
+           "decision_to_msg", "from_time", "goal_event_to_msg", "graph_from_msg", "graph_to_msg",
+           "instance_task_from_msg", "instance_task_to_msg", "team_from_msg", "team_to_msg", "to_duration", "to_time"]
 
 
 def to_time(seconds: float) -> Time:
@@ -73,14 +75,16 @@ def team_to_msg(snap: TeamSnapshot, frame_id: str = "map") -> TeamState:
 def team_from_msg(msg: Any) -> TeamSnapshot:
     """(Messages recorded before the travel fields read as zero travel, before the trait
     fields as no traits.)"""
-    return TeamSnapshot(
-        from_time(msg.header.stamp), tuple(msg.capability_names),
-        tuple(RobotInfo(r.id, r.kind, bool(r.available), tuple(int(c) for c in r.capabilities), float(r.payload),
-                        r.current_task, float(r.busy_for), (float(r.pose.x), float(r.pose.y), float(r.pose.theta)),
-                        str(getattr(r, "site", "")), float(getattr(r, "speed", 0.0)),
-                        tuple(float(a) for a in getattr(r, "traits", ())), str(getattr(r, "home", "")))
-              for r in msg.robots),
-        tuple(getattr(msg, "trait_names", ())))
+    return TeamSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names),
+                        tuple(_robot_info(r) for r in msg.robots), tuple(getattr(msg, "trait_names", ())))
+
+
+def _robot_info(r: Any) -> RobotInfo:
+    p = r.pose
+    return RobotInfo(r.id, r.kind, bool(r.available), _numbers(r.capabilities, int), float(r.payload),
+                     r.current_task, float(r.busy_for), (float(p.x), float(p.y), float(p.theta)),
+                     str(getattr(r, "site", "")), float(getattr(r, "speed", 0.0)),
+                     _numbers(getattr(r, "traits", ()), float), str(getattr(r, "home", "")))
 
 
 def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
@@ -109,23 +113,101 @@ def _numbers(values: Any, kind: type) -> tuple[Any, ...]:
 
 
 def graph_from_msg(msg: Any) -> GraphSnapshot:
-    tasks = []
     newer = bool(msg.tasks) and hasattr(msg.tasks[0], "requires")  # bags of the first format lack the travel/trait fields
-    for t in msg.tasks:
-        status = int(t.status)
-        start = from_time(t.start_time) if status >= _ASSIGNED else None
-        end = from_time(t.end_time) if status == _DONE else None
-        tasks.append(TaskInfo(t.id, status, _numbers(t.capabilities, int), float(t.payload),
-                              float(t.duration), tuple(t.prerequisites), tuple(t.assigned_robots), start, end,
-                              *((str(t.site_from), str(t.site_to), _numbers(t.requires, float), int(t.roles)) if newer
-                                else (str(getattr(t, "site_from", "")), str(getattr(t, "site_to", "")),
-                                      tuple(float(a) for a in getattr(t, "requires", ())),
-                                      int(getattr(t, "roles", 0))))))
+    return _graph(msg, tuple(_task_info(t, newer) for t in msg.tasks))
+
+
+def _graph(msg: Any, tasks: tuple[TaskInfo, ...]) -> GraphSnapshot:
     sites = tuple((str(s.id), float(s.x), float(s.y)) for s in getattr(msg, "sites", ()))
-    return GraphSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names), tuple(tasks), sites,
+    return GraphSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names), tasks, sites,
                          tuple(float(d) for d in getattr(msg, "site_distances", ())),
                          tuple(getattr(msg, "trait_names", ())), bool(getattr(msg, "roles", False)),
                          str(getattr(msg, "objective", "")))
+
+
+def _task_info(t: Any, newer: bool) -> TaskInfo:
+    status = int(t.status)
+    start = from_time(t.start_time) if status >= _ASSIGNED else None
+    end = from_time(t.end_time) if status == _DONE else None
+    return TaskInfo(t.id, status, _numbers(t.capabilities, int), float(t.payload),
+                    float(t.duration), tuple(t.prerequisites), tuple(t.assigned_robots), start, end,
+                    *((str(t.site_from), str(t.site_to), _numbers(t.requires, float), int(t.roles)) if newer
+                      else (str(getattr(t, "site_from", "")), str(getattr(t, "site_to", "")),
+                            tuple(float(a) for a in getattr(t, "requires", ())),
+                            int(getattr(t, "roles", 0)))))
+
+
+_SEQUENCES = (array.array, list, tuple)  # fields compared as they come (a bag reader's numpy arrays are not)
+
+
+class _Reader:
+    """What the incremental readers share: each item's fields as the last message had them
+    (by id) and what they were converted to; an item whose fields are all as before keeps
+    its converted object (the snapshot is equal to the whole conversion's, and an unchanged
+    item is the very same object, which the core's checks and caches recognise)."""
+
+    def __init__(self) -> None:
+        self._raw: dict[str, tuple[Any, ...]] = {}
+        self._info: dict[str, Any] = {}
+
+    def forget(self) -> None:
+        self._raw, self._info = {}, {}
+
+    def _items(self, items: Any, fields: Any, convert: Any) -> tuple[Any, ...]:
+        raw_of, info_of = self._raw, self._info
+        raw: dict[str, tuple[Any, ...]] = {}
+        info: dict[str, Any] = {}
+        out = []
+        for item in items:
+            key = item.id
+            now = fields(item)
+            old = raw_of.get(key)
+            if old is not None and old == now:
+                got = info_of[key]
+            else:
+                got = convert(item)
+                now = tuple(v[:] if isinstance(v, _SEQUENCES) else v for v in now)  # copies: a message may be reused
+            if key not in raw:  # a duplicate id: the core's check says so
+                raw[key], info[key] = now, got
+            out.append(got)
+        self._raw, self._info = raw, info
+        return tuple(out)
+
+
+_task_fields = operator.attrgetter(  # every field of a Task (a C-level read of each)
+    "status", "capabilities", "payload", "duration", "prerequisites", "assigned_robots", "start_time.sec",
+    "start_time.nanosec", "end_time.sec", "end_time.nanosec", "site_from", "site_to", "requires", "roles")
+_robot_fields = operator.attrgetter(  # every field of a RobotState
+    "kind", "available", "capabilities", "payload", "current_task", "busy_for", "pose.x", "pose.y", "pose.theta",
+    "site", "speed", "traits", "home")
+
+
+class GraphReader(_Reader):
+    """:func:`graph_from_msg` for the messages of one stream (the scheduler node's): equal
+    snapshots, the work of a message in proportion to the tasks that changed since the
+    previous one (plus a pass reading the fields). Messages without the travel and trait
+    fields, or whose sequences are not plain (a bag reader's), are converted whole."""
+
+    def read(self, msg: Any) -> GraphSnapshot:
+        tasks = msg.tasks
+        if not tasks or not hasattr(tasks[0], "requires") or not isinstance(tasks[0].capabilities, _SEQUENCES) \
+                or not isinstance(tasks[0].requires, _SEQUENCES):
+            self.forget()
+            return graph_from_msg(msg)
+        return _graph(msg, self._items(tasks, _task_fields, lambda t: _task_info(t, True)))
+
+
+class TeamReader(_Reader):
+    """:func:`team_from_msg` for the messages of one stream, as :class:`GraphReader`."""
+
+    def read(self, msg: Any) -> TeamSnapshot:
+        robots = msg.robots
+        if not robots or not hasattr(robots[0], "home") or not isinstance(robots[0].capabilities, _SEQUENCES) \
+                or not isinstance(robots[0].traits, _SEQUENCES):
+            self.forget()
+            return team_from_msg(msg)
+        return TeamSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names),
+                            self._items(robots, _robot_fields, _robot_info), tuple(msg.trait_names))
 
 
 def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:

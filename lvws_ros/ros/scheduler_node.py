@@ -231,6 +231,7 @@ class SchedulerNode(LifecycleNode):
         self.core: OnlineScheduler | None = None  # made at configure, freed at cleanup
         self.active = False  # between activate and deactivate: deciding and publishing
         self.latest: dict[str, Callable[[], None]] = {}  # the latest message of each kind, for a new core
+        self.team_reader, self.graph_reader = convert.TeamReader(), convert.GraphReader()  # O(changes) per message
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="decide")
         self.in_flight: Future[OnlineDecision | None] | None = None  # the decision being computed
         self.deciding_core: OnlineScheduler | None = None  # the core it is computed by
@@ -351,12 +352,12 @@ class SchedulerNode(LifecycleNode):
     def on_team(self, msg: TeamState) -> None:
         self.received += 1
         self.arrived = time.perf_counter()
-        self.take("TeamState", lambda core: core.offer_team(convert.team_from_msg(msg)))
+        self.take("TeamState", lambda core: core.offer_team(self.team_reader.read(msg)))
 
     def on_graph(self, msg: TaskGraph) -> None:
         self.received += 1
         self.arrived = time.perf_counter()
-        self.take("TaskGraph", lambda core: core.offer_graph(convert.graph_from_msg(msg)))
+        self.take("TaskGraph", lambda core: core.offer_graph(self.graph_reader.read(msg)))
 
     def take(self, kind: str, offer: Callable[[OnlineScheduler], bool]) -> None:
         """Offer a message to the core (once it is configured and idle); kept as the

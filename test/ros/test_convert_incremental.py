@@ -1,0 +1,160 @@
+"""The incremental message readers (GraphReader, TeamReader) and the incremental checks:
+after any change a message can carry, the reader's snapshot equals the whole conversion's,
+tasks and robots that did not change keep their objects, and a snapshot checked against the
+one before is refused exactly when a whole check refuses it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from lvws_msgs.msg import TaskGraph, TeamState
+
+from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot, check_graph, check_team
+from lvws_ros.errors import InstanceError
+from lvws_ros.ros.convert import GraphReader, TeamReader, graph_from_msg, graph_to_msg, team_from_msg, team_to_msg
+
+CAPS = ("arm", "gripper")
+SITES = (("a", 0.0, 0.0), ("b", 3.0, 4.0), ("c", 6.0, 0.0))
+
+
+def task(j: int, status: int = 1, after: tuple[str, ...] = (), site: str = "a") -> TaskInfo:
+    return TaskInfo(f"t{j}", status, (1, j % 2), 1.0 + j % 3, 2.0 + j, after, site_from=site)
+
+
+def graph(n: int = 6, stamp: float = 0.0, sites: tuple = SITES) -> GraphSnapshot:
+    return GraphSnapshot(stamp, CAPS, tuple(task(j, after=(f"t{j - 1}",) if j % 3 else ()) for j in range(n)), sites)
+
+
+def robot(i: int, **kw: object) -> RobotInfo:
+    return RobotInfo(f"r{i}", "jackal", True, (1, 1), 5.0, site="a", speed=1.0, **kw)  # type: ignore[arg-type]
+
+
+def team(n: int = 4, stamp: float = 0.0) -> TeamSnapshot:
+    return TeamSnapshot(stamp, CAPS, tuple(robot(i) for i in range(n)))
+
+
+def set_task(g: GraphSnapshot, j: int, **kw: object) -> GraphSnapshot:
+    tasks = list(g.tasks)
+    tasks[j] = dataclasses.replace(tasks[j], **kw)  # type: ignore[arg-type]
+    return dataclasses.replace(g, tasks=tuple(tasks))
+
+
+# Each kind of change a world's next TaskGraph can carry.
+GRAPH_CHANGES = {
+    "status": lambda g: set_task(g, 1, status=2, assigned_robots=("r0",), start=1.5),
+    "done": lambda g: set_task(g, 0, status=3, assigned_robots=("r1", "r2"), start=0.5, end=2.5),
+    "added": lambda g: dataclasses.replace(g, tasks=(*g.tasks, task(99, after=("t0",), site="b"))),
+    "cancelled": lambda g: dataclasses.replace(g, tasks=g.tasks[:-1]),
+    "reordered": lambda g: dataclasses.replace(g, tasks=g.tasks[::-1]),
+    "duration": lambda g: set_task(g, 2, duration=9.0),
+    "prerequisites": lambda g: set_task(g, 4, prerequisites=("t0", "t1")),
+    "sites": lambda g: dataclasses.replace(g, sites=(*g.sites, ("d", 1.0, 1.0))),
+    "site_of_task": lambda g: set_task(g, 3, site_from="c", site_to="b"),
+    "nothing": lambda g: g,
+}
+TEAM_CHANGES = {
+    "busy": lambda t: dataclasses.replace(t, robots=(dataclasses.replace(t.robots[0], available=False, busy_for=2.5,
+                                                                         current_task="t1"), *t.robots[1:])),
+    "lost": lambda t: dataclasses.replace(t, robots=t.robots[1:]),
+    "joined": lambda t: dataclasses.replace(t, robots=(*t.robots, robot(9))),
+    "moved": lambda t: dataclasses.replace(t, robots=(dataclasses.replace(t.robots[2], site="", pose=(1.0, 2.0, 0.0)),
+                                                      *t.robots[:2], *t.robots[3:])),
+    "nothing": lambda t: t,
+}
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.sampled_from(sorted(GRAPH_CHANGES)), min_size=1, max_size=6))
+def test_the_graph_reader_equals_the_whole_conversion_after_any_changes(changes: list[str]) -> None:
+    reader, g = GraphReader(), graph()
+    before = reader.read(graph_to_msg(g))
+    for n, change in enumerate(changes):
+        g = dataclasses.replace(GRAPH_CHANGES[change](g), stamp=float(n + 1))
+        msg = graph_to_msg(g)
+        got = reader.read(msg)
+        assert got == graph_from_msg(msg)
+        old = {t.id: t for t in before.tasks}
+        for t in got.tasks:  # an unchanged task is the very object of the message before
+            if t.id in old and t == old[t.id]:
+                assert t is old[t.id]
+        before = got
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.sampled_from(sorted(TEAM_CHANGES)), min_size=1, max_size=5))
+def test_the_team_reader_equals_the_whole_conversion_after_any_changes(changes: list[str]) -> None:
+    reader, t = TeamReader(), team()
+    before = reader.read(team_to_msg(t))
+    for n, change in enumerate(changes):
+        t = dataclasses.replace(TEAM_CHANGES[change](t), stamp=float(n + 1))
+        msg = team_to_msg(t)
+        got = reader.read(msg)
+        assert got == team_from_msg(msg)
+        old = {r.id: r for r in before.robots}
+        assert all(r is old[r.id] for r in got.robots if r.id in old and r == old[r.id])
+        before = got
+
+
+def test_a_reused_message_changed_in_place_is_read_again() -> None:
+    reader, msg = GraphReader(), graph_to_msg(graph())
+    reader.read(msg)
+    msg.tasks[2].capabilities[1] = 0
+    msg.tasks[3].prerequisites.append("t0")
+    assert reader.read(msg) == graph_from_msg(msg)
+
+
+def test_messages_without_the_newer_fields_are_read_whole() -> None:
+    plain = TaskGraph()
+    plain.tasks = graph_to_msg(graph()).tasks
+    assert GraphReader().read(plain) == graph_from_msg(plain)
+    assert TeamReader().read(TeamState()) == team_from_msg(TeamState())
+
+
+BAD_TASKS = {
+    "status": {"status": 9},
+    "capabilities": {"capabilities": (1,)},
+    "duration": {"duration": 0.0},
+    "prerequisite": {"prerequisites": ("nope",)},
+    "cycle": {"prerequisites": ("t5",)},  # t0 <- t5 <- t4 <- t3 ... t0: a cycle
+    "site": {"site_from": "nowhere"},
+}
+
+
+@pytest.mark.parametrize("field", sorted(BAD_TASKS))
+def test_a_bad_task_is_refused_when_checked_against_a_good_graph(field: str) -> None:
+    good = graph()
+    check_graph(good)
+    bad = set_task(good, 0, **BAD_TASKS[field])
+    if field == "cycle":
+        bad = set_task(set_task(bad, 3, prerequisites=("t2",)), 5, prerequisites=("t4",))
+    with pytest.raises(InstanceError):
+        check_graph(bad)
+    with pytest.raises(InstanceError):
+        check_graph(bad, good)
+
+
+def test_a_task_cancelled_while_another_waits_on_it_is_refused() -> None:
+    good = graph()
+    gone = dataclasses.replace(good, tasks=(*good.tasks[:1], task(50), *good.tasks[2:]))  # t1 replaced, t2 waits on it
+    with pytest.raises(InstanceError, match="prerequisites"):
+        check_graph(gone, good)
+
+
+def test_a_removed_site_is_refused_for_an_unchanged_task() -> None:
+    good = set_task(graph(), 1, site_from="c")
+    with pytest.raises(InstanceError, match="unknown site"):
+        check_graph(dataclasses.replace(good, sites=SITES[:2]), good)
+
+
+def test_a_bad_robot_is_refused_when_checked_against_a_good_team() -> None:
+    good = team()
+    check_team(good)
+    for bad in (dataclasses.replace(good.robots[1], payload=float("nan")),
+                dataclasses.replace(good.robots[1], capabilities=(1, 2)), dataclasses.replace(good.robots[1], id="")):
+        with pytest.raises(InstanceError):
+            check_team(dataclasses.replace(good, robots=(good.robots[0], bad, *good.robots[2:])), good)
+    with pytest.raises(InstanceError, match="capabilities"):  # the same robots under other capability names
+        check_team(dataclasses.replace(good, capability_names=("arm",)), good)
