@@ -133,6 +133,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
         return ("", "") if tr is None else (tr.sites[tr.task_from[j]], tr.sites[tr.task_to[j]])
 
     lat: list[float] = []
+    team_reader, graph_reader = convert.TeamReader(), convert.GraphReader()  # as the node reads its messages
     while not state.done():
         free = state.robot_available()
         team = TeamSnapshot(state.time, names, tuple(
@@ -146,8 +147,8 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
             for j, t in enumerate(inst.tasks)), *sites)
         team_msg, graph_msg = convert.team_to_msg(team), convert.graph_to_msg(graph)
         t0 = time.perf_counter()
-        online.offer_team(convert.team_from_msg(team_msg))
-        online.offer_graph(convert.graph_from_msg(graph_msg))
+        online.offer_team(team_reader.read(team_msg))
+        online.offer_graph(graph_reader.read(graph_msg))
         d = online.decide(started=t0)  # the budget counts from the messages' arrival, as in the node
         lat.append(time.perf_counter() - t0)
         for tid, robots in d.assignments if d else ():

@@ -432,12 +432,16 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
     assigned but not yet acknowledged) counted as running (the rules of the module doc)."""
     now = max(team.stamp, graph.stamp)
     m, n = inst.num_tasks, inst.num_robots
-    done = {t.id for t in graph.tasks if t.status == _DONE}
-    status = np.array([_QUEUED if t.status == _READY and not done.issuperset(t.prerequisites)
-                       else t.status for t in graph.tasks], dtype=np.int8)
+    tasks = graph.tasks
+    status = np.fromiter([t.status for t in tasks], dtype=np.int8, count=m)
+    done = {tasks[j].id for j in np.flatnonzero(status == _DONE).tolist()}
+    for k in np.flatnonzero(status == _READY).tolist():
+        if not done.issuperset(tasks[k].prerequisites):
+            status[k] = _QUEUED
     index = inst.robot_index
-    teams: list[tuple[int, ...]] = [tuple(index[r] for r in t.assigned_robots if r in index) if t.assigned_robots
-                                    else () for t in graph.tasks]
+    teams: list[tuple[int, ...]] = [()] * m
+    for k in [k for k, t in enumerate(tasks) if t.assigned_robots]:
+        teams[k] = tuple(index[r] for r in tasks[k].assigned_robots if r in index)
     for tid, robots in pending.items():
         j = inst.task_index.get(tid)
         if j is not None and status[j] == TaskStatus.READY and all(r in inst.robot_index for r in robots):
@@ -496,14 +500,42 @@ def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:
     """What the scheduling instance of two snapshots depends on: equal keys, same instance
     (a new one when tasks or robots come or go, or change)."""
     known = {s[0] for s in graph.sites}
-    return (team.capability_names, tuple((r.id, r.capabilities, r.payload) for r in team.robots),
-            tuple((t.id, t.capabilities, t.payload, t.duration, t.prerequisites) for t in graph.tasks),
+    return (team.capability_names, tuple(_robot_part(r) for r in team.robots), tuple(_task_part(t) for t in graph.tasks),
+            (graph.trait_names, graph.roles, graph.objective),
             # travel: the sites, speeds and task sites; where a robot is only when it is off
             # every site (a new site at its pose); the state follows the robots (build_state)
             graph.sites, graph.distances, tuple((t.site_from, t.site_to) for t in graph.tasks),
             tuple((r.speed, bool(graph.sites) and r.site not in known,  # off every site: a site of its own,
                    r.pose[:2] if graph.sites and r.site not in known  # at its pose while it stands free
                    and r.available and not r.current_task else None) for r in team.robots))
+
+
+def _robot_part(r: RobotInfo) -> tuple[Any, ...]:
+    """What of a robot the instance holds (travel aside)."""
+    return r.id, r.capabilities, r.payload, r.traits, r.home
+
+
+def _task_part(t: TaskInfo) -> tuple[Any, ...]:
+    """What of a task the instance holds (travel aside)."""
+    return t.id, t.capabilities, t.payload, t.duration, t.prerequisites, t.requires, t.roles
+
+
+def same_cell(before: tuple[TeamSnapshot, GraphSnapshot], now: tuple[TeamSnapshot, GraphSnapshot]) -> bool:
+    """Whether two pairs of snapshots without travel describe the same cell: they differ at
+    most in what changes as the world runs (stamps, statuses, subteams, times, availability,
+    busy times, poses), so that their schedulable parts (:func:`schedulable`) and instances
+    are the same. Robots and tasks that are the very same objects (an incremental reader
+    keeps them) cost a look each."""
+    (t0, g0), (t1, g1) = before, now
+    if g0.sites or g1.sites or len(t0.robots) != len(t1.robots) or len(g0.tasks) != len(g1.tasks):
+        return False
+    if (t0.capability_names, t0.trait_names, g0.capability_names, g0.trait_names, g0.roles, g0.objective) != \
+            (t1.capability_names, t1.trait_names, g1.capability_names, g1.trait_names, g1.roles, g1.objective):
+        return False
+    return all(a is b or (_robot_part(a), a.speed) == (_robot_part(b), b.speed)
+               for a, b in zip(t0.robots, t1.robots, strict=True)) and \
+        all(a is b or (_task_part(a), a.site_from, a.site_to) == (_task_part(b), b.site_from, b.site_to)
+            for a, b in zip(g0.tasks, g1.tasks, strict=True))
 
 
 def close_policy(policy: Policy | None) -> None:
@@ -535,6 +567,7 @@ class OnlineScheduler:
         self._inst: Instance | None = None
         self._key: object = None
         self._view: GraphSnapshot | None = None  # the schedulable part of self.graph
+        self._basis: tuple[TeamSnapshot, GraphSnapshot] | None = None  # the snapshots self._view is of
         self._held: list[str] = []  # tasks held back (no present subteam can cover them)
         self._seen_free: frozenset[str] = frozenset()
         self._seen_ready: frozenset[str] = frozenset()
@@ -544,7 +577,7 @@ class OnlineScheduler:
         the current instance; pending assignments stay."""
         old = (self.policy, self.fallback)
         self.policy, self.fallback = policy, fallback
-        self._inst, self._key, self._main_refused = None, None, ""
+        self._inst, self._key, self._main_refused, self._basis = None, None, "", None
         for p in old:
             if p is not policy and p is not fallback:
                 close_policy(p)
@@ -623,7 +656,12 @@ class OnlineScheduler:
     def instance(self) -> Instance:
         """The instance of the schedulable part of the latest snapshots (:func:`schedulable`)."""
         assert self.team is not None and self.graph is not None
+        now = (self.team, self.graph)
+        if self._inst is not None and not self._held and self._basis is not None and same_cell(self._basis, now):
+            self._basis, self._view = now, self.graph  # nothing held back, nothing but the run changed
+            return self._inst
         view, key, held = scheduling_view(self.team, self.graph)
+        self._basis = None
         if sorted(held) != self._held:
             self._held = sorted(held)
             if held:
@@ -643,6 +681,7 @@ class OnlineScheduler:
                 self._main_refused = f"{type(exc).__name__}: {exc}"
             if self.fallback is not None:
                 self.fallback.reset(self._inst)
+        self._basis = now
         return self._inst
 
     def decide(self, started: float | None = None) -> OnlineDecision | None:

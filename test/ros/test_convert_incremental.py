@@ -38,16 +38,22 @@ def team(n: int = 4, stamp: float = 0.0) -> TeamSnapshot:
 
 def set_task(g: GraphSnapshot, j: int, **kw: object) -> GraphSnapshot:
     tasks = list(g.tasks)
+    j %= len(tasks)
     tasks[j] = dataclasses.replace(tasks[j], **kw)  # type: ignore[arg-type]
     return dataclasses.replace(g, tasks=tuple(tasks))
+
+
+def _next(items: tuple[TaskInfo, ...] | tuple[RobotInfo, ...]) -> int:
+    """A number no id of ``items`` has yet."""
+    return 1 + max(int(x.id[1:]) for x in items)
 
 
 # Each kind of change a world's next TaskGraph can carry.
 GRAPH_CHANGES = {
     "status": lambda g: set_task(g, 1, status=2, assigned_robots=("r0",), start=1.5),
     "done": lambda g: set_task(g, 0, status=3, assigned_robots=("r1", "r2"), start=0.5, end=2.5),
-    "added": lambda g: dataclasses.replace(g, tasks=(*g.tasks, task(99, after=("t0",), site="b"))),
-    "cancelled": lambda g: dataclasses.replace(g, tasks=g.tasks[:-1]),
+    "added": lambda g: dataclasses.replace(g, tasks=(*g.tasks, task(_next(g.tasks), after=("t0",), site="b"))),
+    "cancelled": lambda g: dataclasses.replace(g, tasks=g.tasks[:-1] if len(g.tasks) > 1 else g.tasks),
     "reordered": lambda g: dataclasses.replace(g, tasks=g.tasks[::-1]),
     "duration": lambda g: set_task(g, 2, duration=9.0),
     "prerequisites": lambda g: set_task(g, 4, prerequisites=("t0", "t1")),
@@ -58,10 +64,10 @@ GRAPH_CHANGES = {
 TEAM_CHANGES = {
     "busy": lambda t: dataclasses.replace(t, robots=(dataclasses.replace(t.robots[0], available=False, busy_for=2.5,
                                                                          current_task="t1"), *t.robots[1:])),
-    "lost": lambda t: dataclasses.replace(t, robots=t.robots[1:]),
-    "joined": lambda t: dataclasses.replace(t, robots=(*t.robots, robot(9))),
-    "moved": lambda t: dataclasses.replace(t, robots=(dataclasses.replace(t.robots[2], site="", pose=(1.0, 2.0, 0.0)),
-                                                      *t.robots[:2], *t.robots[3:])),
+    "lost": lambda t: dataclasses.replace(t, robots=t.robots[1:] if len(t.robots) > 1 else t.robots),
+    "joined": lambda t: dataclasses.replace(t, robots=(*t.robots, robot(_next(t.robots)))),
+    "moved": lambda t: dataclasses.replace(t, robots=(*t.robots[:-1], dataclasses.replace(t.robots[-1], site="",
+                                                                                          pose=(1.0, 2.0, 0.0)))),
     "nothing": lambda t: t,
 }
 
