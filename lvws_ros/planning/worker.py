@@ -210,20 +210,37 @@ class PlannerProcess:
             pass
         return out
 
+    def _drain(self, wait: float) -> None:
+        """Read and drop what the child has sent, waiting at most ``wait`` seconds for it."""
+        try:
+            for _ in range(1000):  # a child sending without pause cannot hold this side here
+                if self.inbox is None or not self.inbox.poll(wait):
+                    return
+                self.inbox.recv()
+                wait = 0.0
+        except (EOFError, OSError):
+            pass
+
     def stop(self) -> None:
-        """End the child (politely, then by force) and the sender thread."""
+        """End the child (politely, then by force) and the sender thread. What the child
+        sends meanwhile is read and dropped: a child blocked on a full pipe to this side
+        would never read the stop (nor let the sender finish)."""
         with self._wake:
             self._closed = True
             self._wake.notify()
-        if self._sender is not None:
-            self._sender.join(2.0)
-        if self.outbox is not None:
-            try:
+        end = time.perf_counter() + 2.0
+        while self._sender is not None and self._sender.is_alive() and time.perf_counter() < end:
+            self._drain(0.05)
+        if self.outbox is not None and not (self._sender is not None and self._sender.is_alive()):
+            try:  # the sender is done: this side is the pipe's only writer
                 self.outbox.send(("stop",))
             except (BrokenPipeError, OSError):
                 pass
         if self.process is not None:
-            self.process.join(2.0)
+            end = time.perf_counter() + 2.0
+            while self.process.is_alive() and time.perf_counter() < end:
+                self._drain(0.05)
+                self.process.join(0.05)
             if self.process.is_alive():
                 self.process.kill()
                 self.process.join(2.0)

@@ -1,0 +1,39 @@
+"""The planner's process: stopping it ends the child and the sender thread even when both
+pipes are full (a child blocked sending plans nobody reads, a sender blocked sending states
+to that child)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from lvws_ros.core.datasets import subteam_heavy_instance
+from lvws_ros.core.executor import State
+from lvws_ros.planning.worker import PlannerProcess
+
+
+def test_stop_ends_a_child_and_a_sender_blocked_on_full_pipes() -> None:
+    inst = subteam_heavy_instance(np.random.default_rng(0), 200, 1000, "full-pipes")  # plans and states of tens of KB
+    proc = PlannerProcess(seed=0, workers=1, learned=False)
+    proc.start()
+    child = proc.process
+    try:
+        assert proc.wait_ready(60.0)
+        state = State.initial(inst)
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:  # states until the sender is stuck on a full pipe
+            proc.send(state)
+            time.sleep(0.05)
+            if proc._pending is not None and time.monotonic() > deadline - 25.0:
+                break
+        stopper = threading.Thread(target=proc.stop, daemon=True)
+        stopper.start()
+        stopper.join(30.0)
+        assert not stopper.is_alive(), "stop() hung"
+        assert child is not None and not child.is_alive()
+        assert proc.process is None and proc.inbox is None
+    finally:
+        if child is not None and child.is_alive():
+            child.kill()
