@@ -45,7 +45,11 @@ def to_time(seconds: float) -> Time:
 
 def from_time(t: Any) -> float:
     """Seconds of a builtin_interfaces Time or Duration."""
-    return float(t.sec) + float(t.nanosec) * 1e-9
+    return _seconds(t.sec, t.nanosec)
+
+
+def _seconds(sec: int, nanosec: int) -> float:
+    return float(sec) + float(nanosec) * 1e-9
 
 
 def to_duration(seconds: float) -> Duration:
@@ -80,11 +84,13 @@ def team_from_msg(msg: Any) -> TeamSnapshot:
 
 
 def _robot_info(r: Any) -> RobotInfo:
-    p = r.pose
+    if hasattr(r, "home"):
+        return _robot_of_fields(r.id, _robot_fields(r))
+    p = r.pose  # recorded before the travel or trait fields
     return RobotInfo(r.id, r.kind, bool(r.available), _numbers(r.capabilities, int), float(r.payload),
                      r.current_task, float(r.busy_for), (float(p.x), float(p.y), float(p.theta)),
                      str(getattr(r, "site", "")), float(getattr(r, "speed", 0.0)),
-                     _numbers(getattr(r, "traits", ()), float), str(getattr(r, "home", "")))
+                     _numbers(getattr(r, "traits", ()), float), "")
 
 
 def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
@@ -126,15 +132,15 @@ def _graph(msg: Any, tasks: tuple[TaskInfo, ...]) -> GraphSnapshot:
 
 
 def _task_info(t: Any, newer: bool) -> TaskInfo:
-    status = int(t.status)
+    if newer:
+        return _task_of_fields(t.id, _task_fields(t))
+    status = int(t.status)  # recorded before the travel and trait fields
     start = from_time(t.start_time) if status >= _ASSIGNED else None
     end = from_time(t.end_time) if status == _DONE else None
-    return TaskInfo(t.id, status, _numbers(t.capabilities, int), float(t.payload),
-                    float(t.duration), tuple(t.prerequisites), tuple(t.assigned_robots), start, end,
-                    *((str(t.site_from), str(t.site_to), _numbers(t.requires, float), int(t.roles)) if newer
-                      else (str(getattr(t, "site_from", "")), str(getattr(t, "site_to", "")),
-                            tuple(float(a) for a in getattr(t, "requires", ())),
-                            int(getattr(t, "roles", 0)))))
+    return TaskInfo(t.id, status, _numbers(t.capabilities, int), float(t.payload), float(t.duration),
+                    tuple(t.prerequisites), tuple(t.assigned_robots), start, end, str(getattr(t, "site_from", "")),
+                    str(getattr(t, "site_to", "")), tuple(float(a) for a in getattr(t, "requires", ())),
+                    int(getattr(t, "roles", 0)))
 
 
 _SEQUENCES = (array.array, list, tuple)  # fields compared as they come (a bag reader's numpy arrays are not)
@@ -165,7 +171,7 @@ class _Reader:
             if old is not None and old == now:
                 got = info_of[key]
             else:
-                got = convert(item)
+                got = convert(key, now)
                 now = tuple(v[:] if isinstance(v, _SEQUENCES) else v for v in now)  # copies: a message may be reused
             if key not in raw:  # a duplicate id: the core's check says so
                 raw[key], info[key] = now, got
@@ -182,6 +188,21 @@ _robot_fields = operator.attrgetter(  # every field of a RobotState
     "site", "speed", "traits", "home")
 
 
+def _task_of_fields(key: str, f: tuple[Any, ...]) -> TaskInfo:
+    """:func:`_task_info` of a Task whose fields :data:`_task_fields` read."""
+    status = int(f[0])
+    return TaskInfo(key, status, _numbers(f[1], int), float(f[2]), float(f[3]), tuple(f[4]), tuple(f[5]),
+                    _seconds(f[6], f[7]) if status >= _ASSIGNED else None, _seconds(f[8], f[9]) if status == _DONE
+                    else None, str(f[10]), str(f[11]), _numbers(f[12], float), int(f[13]))
+
+
+def _robot_of_fields(key: str, f: tuple[Any, ...]) -> RobotInfo:
+    """:func:`_robot_info` of a RobotState whose fields :data:`_robot_fields` read."""
+    return RobotInfo(key, f[0], bool(f[1]), _numbers(f[2], int), float(f[3]), f[4], float(f[5]),
+                     (float(f[6]), float(f[7]), float(f[8])), str(f[9]), float(f[10]), _numbers(f[11], float),
+                     str(f[12]))
+
+
 class GraphReader(_Reader):
     """:func:`graph_from_msg` for the messages of one stream (the scheduler node's): equal
     snapshots, the work of a message in proportion to the tasks that changed since the
@@ -194,7 +215,7 @@ class GraphReader(_Reader):
                 or not isinstance(tasks[0].requires, _SEQUENCES):
             self.forget()
             return graph_from_msg(msg)
-        return _graph(msg, self._items(tasks, _task_fields, lambda t: _task_info(t, True)))
+        return _graph(msg, self._items(tasks, _task_fields, _task_of_fields))
 
 
 class TeamReader(_Reader):
@@ -207,7 +228,7 @@ class TeamReader(_Reader):
             self.forget()
             return team_from_msg(msg)
         return TeamSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names),
-                            self._items(robots, _robot_fields, _robot_info), tuple(msg.trait_names))
+                            self._items(robots, _robot_fields, _robot_of_fields), tuple(msg.trait_names))
 
 
 def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:
