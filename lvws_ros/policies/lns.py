@@ -42,9 +42,17 @@ The objective is the makespan, then the sum of the tasks' ends (so that a window
 critical path can still make room). CP-SAT is hinted with the incumbent. The solution's
 subteams and per-robot orders are left-shifted in real time
 (:func:`~lvws_ros.policies.exact.left_shift`) and kept only when shorter (or as short with
-a smaller sum of ends). Windows are chosen at random times, and every third one ends at
-the incumbent's makespan (the tasks that make it). The result is valid by construction
-and checked by :func:`~lvws_ros.core.schedule.check_schedule`.
+a smaller sum of ends). Four kinds of neighbourhood (KINDS) choose the window's tasks:
+consecutive tasks from a random time on; the tasks that end the schedule; the critical
+chain's tasks around a random one of them (:func:`critical_chain`: what holds the
+makespan up) with the tasks sharing their robots; the tasks of the robot, or over pools the
+pool, busiest over a random stretch. Over pools, each round draws a kind by its weight, and
+a kind's weight follows how often its neighbourhoods shortened the schedule (adaptive
+large-neighbourhood search), never below MIN_WEIGHT. Per robot the windows are the first
+two kinds only, a third of them at the end of the schedule: there (a public coalition
+benchmark with the way home, ``examples/dcmrta``; the ``traits-roles`` family) the chain
+and busy windows shortened less in the same number of rounds. The result is valid by
+construction and checked by :func:`~lvws_ros.core.schedule.check_schedule`.
 """
 
 from __future__ import annotations
@@ -84,9 +92,12 @@ ROUND_LIMIT = 0.5  # seconds CP-SAT may take for one neighbourhood
 LATER = 2  # tasks after the window in the model (shifted, not re-planned), in windows
 LATER_TRAVEL = 1  # the same with travel
 MIN_WINDOW = 2  # the adaptive window never holds fewer tasks
+KINDS = ("time", "tail", "chain", "busy")  # how a neighbourhood's tasks are chosen (_neighbourhood)
+REACTION, MIN_WEIGHT = 0.2, 0.1  # a kind's weight moves this far towards 1 (shortened) or 0 per round; its floor
 NOT_RUN, OPEN, CLOSED = 0, 1, 2  # a neighbourhood: no time left to solve it; solved, not proven; proven optimal
 
-__all__ = ["DEFAULT_WINDOW", "DEFAULT_WINDOW_POOLS", "DEFAULT_WINDOW_TRAVEL", "LNSResult", "improve"]
+__all__ = ["DEFAULT_WINDOW", "DEFAULT_WINDOW_POOLS", "DEFAULT_WINDOW_TRAVEL", "KINDS", "LNSResult", "critical_chain",
+           "improve"]
 
 
 @dataclass
@@ -314,6 +325,116 @@ def _pool_window_model(inst: Instance, state: State, inc: Schedule, found: tuple
     return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), closed
 
 
+def critical_chain(inst: Instance, inc: Schedule) -> list[int]:
+    """The tasks that hold ``inc``'s makespan up, last first: from the task that ends it
+    (with the objective "return", the one after which a robot is home last), back through
+    what each one waited for: the prerequisite or member's task before it that ended last,
+    when that is when its subteam set out (the executor's rule: a subteam sets out once
+    the task is ready and every member is free, and starts when the last one is there).
+    It stops at a task that nothing held up (it started when the state let it)."""
+    start = {inst.task_index[a.task]: a.start for a in inc.assignments}
+    end = {inst.task_index[a.task]: a.end for a in inc.assignments}
+    team = {inst.task_index[a.task]: [inst.robot_index[r] for r in a.robots] for a in inc.assignments}
+    if not end:
+        return []
+    previous: dict[tuple[int, int], int] = {}  # (robot, task): the robot's task before it
+    last_of: dict[int, int] = {}
+    for j in sorted(end, key=lambda k: (start[k], k)):
+        for r in team[j]:
+            if r in last_of:
+                previous[r, j] = last_of[r]
+            last_of[r] = j
+    travel = inst.travel
+
+    def way(r: int, j: int) -> float:  # from where the robot's task before j leaves it (or where it starts)
+        if travel is None:
+            return 0.0
+        k = previous.get((r, j))
+        return travel.time(r, travel.robot_site[r] if k is None else travel.task_to[k], travel.task_from[j])
+
+    finish = dict(end)
+    if travel is not None and inst.objective == "return":
+        for r, j in last_of.items():
+            finish[j] = max(finish[j], end[j] + travel.time(r, travel.task_to[j], travel.home(r)))
+    j = max(finish, key=lambda k: (finish[k], k))
+    chain = [j]
+    while True:
+        # the subteam sets out once the task is ready and every member is free, and starts
+        # when the last member is there (the executor's rule)
+        departs = start[j] - max(way(r, j) for r in team[j])
+        held = [(end[q], q) for q in inst.prerequisites[j] if q in end]
+        held += [(end[k], k) for r in team[j] if (k := previous.get((r, j))) is not None]
+        if not held:
+            break
+        when, k = max(held)
+        if when < departs - TOLERANCE * max(1.0, abs(departs)) or k in chain:
+            break
+        chain.append(k)
+        j = k
+    return chain
+
+
+def _neighbourhood(inst: Instance, inc: Schedule, todo: list[int], started: set[int], kind: str, window: int,
+                   later_windows: int, rng: np.random.Generator,
+                   found: tuple[Pool, ...]) -> tuple[list[int], list[int], list[int]]:
+    """A neighbourhood of ``kind`` (KINDS): the prefix (fixed), the window (re-planned) and
+    the later tasks (kept, moved). It spans ``window * (1 + later_windows)`` consecutive
+    tasks of ``todo`` (sorted by start) from a time on: everything before is the prefix,
+    so every prerequisite of a task in it is in it or before it.
+
+    * ``time``: from a random task on, the window the first ``window`` tasks;
+    * ``tail``: the last ``window`` tasks (those that end the schedule);
+    * ``chain``: around a random task of the critical chain (:func:`critical_chain`), the
+      window its chain tasks first, then the tasks sharing a robot with them;
+    * ``busy``: from a random task on, the window the tasks of the robot (over pools: the
+      pool) busiest over the span first."""
+    span = window * (1 + later_windows)
+    by_task = inc.by_task()
+    starts = [by_task[inst.tasks[j].id].start for j in todo]
+    position = {j: i for i, j in enumerate(todo)}
+    first: list[int] = []  # the tasks the window takes first, in this order
+    chain = [j for j in critical_chain(inst, inc) if j in position] if kind == "chain" else []
+    if kind == "tail":
+        first_at = max(0, len(todo) - window)
+    elif chain:
+        centre = position[chain[int(rng.integers(0, len(chain)))]]
+        first_at = max(0, centre - window // 2)
+    else:
+        first_at = int(rng.integers(0, max(1, len(todo) - window + 1)))
+    # A neighbourhood starts at a time: tasks starting then but sorted before it belong to it.
+    while first_at > 0 and starts[first_at - 1] >= starts[first_at] - TOLERANCE:
+        first_at -= 1
+    tasks = todo[first_at:first_at + span]
+    if kind == "chain":
+        on_chain = set(chain)
+        first = [j for j in tasks if j in on_chain]
+        robots = {r for j in first for r in by_task[inst.tasks[j].id].robots}
+        first += [j for j in tasks if j not in on_chain and robots & set(by_task[inst.tasks[j].id].robots)]
+    elif kind == "busy":
+        first = _busiest(inst, by_task, tasks, found)
+    picked = list(dict.fromkeys([*first, *tasks]))[:window]
+    chosen = set(picked)
+    later = [j for j in tasks if j not in chosen]
+    return sorted(started | set(todo[:first_at])), picked, later
+
+
+def _busiest(inst: Instance, by_task: dict[str, Assignment], tasks: list[int], found: tuple[Pool, ...]) -> list[int]:
+    """The tasks of ``tasks`` that use the robot (or, over pools, the pool: the share of its
+    units) with the most work among them, in their order."""
+    of = {r: p for p, pool in enumerate(found) for r in pool.robots}
+    load: dict[int, float] = {}
+    users: dict[int, list[int]] = {}
+    for j in tasks:
+        members = [inst.robot_index[r] for r in by_task[inst.tasks[j].id].robots]
+        for unit in {of[r] for r in members} if found else set(members):
+            share = sum(of[r] == unit for r in members) / found[unit].size if found else 1.0
+            load[unit] = load.get(unit, 0.0) + share * float(inst.durations[j])
+            users.setdefault(unit, []).append(j)
+    if not load:
+        return []
+    return users[max(load, key=lambda u: (load[u], -u))]
+
+
 def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, time_limit: float = 10.0,
             window: int | None = None, workers: int = 1, seed: int = 0,
             round_limit: float = ROUND_LIMIT, bound: float | None = None,
@@ -346,6 +467,7 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
     later_windows = LATER if inst.travel is None else LATER_TRAVEL
     rng = np.random.default_rng(seed)
+    weights = np.ones(len(KINDS))  # how often each kind of neighbourhood is chosen (adapted: what shortens)
     started = {j for j in range(inst.num_tasks) if state.task_status[j] >= TaskStatus.ASSIGNED}
     rounds = improved = 0
     deadline = t_start + time_limit
@@ -361,17 +483,11 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
                       key=lambda j: (by_task[inst.tasks[j].id].start, j))
         if not todo:
             break
-        if rounds % 3 == 2:  # the tail: the window of tasks that end the schedule
-            first_at = max(0, len(todo) - window)
-        else:
-            first_at = int(rng.integers(0, max(1, len(todo) - window + 1)))
-        # A window starts at a time: tasks starting then but sorted before it belong to it.
-        t0 = by_task[inst.tasks[todo[first_at]].id].start
-        while first_at > 0 and by_task[inst.tasks[todo[first_at - 1]].id].start >= t0 - TOLERANCE:
-            first_at -= 1
-        picked = todo[first_at:first_at + window]
-        prefix = sorted(started | set(todo[:first_at]))
-        later = todo[first_at + window:first_at + window + later_windows * window]
+        if pooled:
+            kind = KINDS[int(rng.choice(len(KINDS), p=weights / weights.sum()))]
+        else:  # per robot, a third of the windows end the schedule, the rest from random times
+            kind = "tail" if rounds % 3 == 2 else "time"
+        prefix, picked, later = _neighbourhood(inst, best, todo, started, kind, window, later_windows, rng, found)
         whole = len(todo) <= window  # the whole rest fits one window: one solve says all, with all the time left
         solve_by = time.perf_counter() + (left if whole else min(round_limit, left))
         work = None if max_rounds is None else round_limit
@@ -387,12 +503,16 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         if adaptive and solved != NOT_RUN:  # a proven neighbourhood: try a larger one; an open one: a smaller one
             window = min(window_cap, window + 1) if solved == CLOSED else max(MIN_WINDOW, window - 1)
 
-        if cand is not None and _better(_score(cand), _score(best)):
+        shorter = cand is not None and _better(_score(cand), _score(best))
+        if cand is not None and shorter:
             if check_schedule(inst, cand):
                 raise ExpertError(f"lns: neighbourhood {rounds} gave an invalid schedule (a bug): "
                                   f"{check_schedule(inst, cand)[0]}")
             best = cand
             improved += 1
+        if solved != NOT_RUN:  # a kind that shortens the schedule is chosen more often (never never)
+            k = KINDS.index(kind)
+            weights[k] = max(MIN_WEIGHT, (1 - REACTION) * weights[k] + REACTION * float(shorter))
         after = max(after, time.perf_counter() - solve_by)
         if whole:
             break

@@ -6,7 +6,9 @@ too big for CP-SAT's whole model, with travel too."""
 
 from __future__ import annotations
 
+import itertools
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,12 +18,14 @@ from lvws_ros.core.datasets import subteam_heavy_instance
 from lvws_ros.core.executor import State, simulate
 from lvws_ros.core.families import family_instance
 from lvws_ros.core.formats import instance_from_dict, load_schedule, save_schedule
+from lvws_ros.core.importers import import_psplib
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.errors import ExpertError
 from lvws_ros.learning.auto import AutoPolicy
+from lvws_ros.policies import lns
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomPolicy
 from lvws_ros.policies.exact import _time_scale, _travel_times, left_shift, solve_exact
-from lvws_ros.policies.lns import _window_model, improve
+from lvws_ros.policies.lns import KINDS, _neighbourhood, _window_model, critical_chain, improve
 
 
 def _cell():
@@ -174,11 +178,74 @@ def test_the_travel_hint_is_a_solution_of_the_window_and_whole_models(monkeypatc
 
 def test_the_window_adapts_to_what_cp_sat_proves_in_a_round():
     # Twenty interchangeable robots with travel and the way home: a window of six tasks is
-    # more than CP-SAT closes in a round; the window shrinks until it does, and the result is
-    # no longer than the fixed window's.
+    # more than CP-SAT closes in a round; the window shrinks until it does, and the results
+    # (three seeds: the neighbourhoods are drawn at random) are no longer than the fixed window's.
     inst = _coalition_cell()
     inc = simulate(inst, GreedyPayloadPolicy()).schedule
-    fixed = improve(inst, inc, max_rounds=12, round_limit=0.05, adaptive=False)
-    adapted = improve(inst, inc, max_rounds=12, round_limit=0.05)
-    assert adapted.window < fixed.window
-    assert check_schedule(inst, adapted.schedule) == [] and adapted.schedule.makespan <= fixed.schedule.makespan
+    fixed = [improve(inst, inc, max_rounds=12, round_limit=0.05, adaptive=False, seed=s) for s in range(3)]
+    adapted = [improve(inst, inc, max_rounds=12, round_limit=0.05, seed=s) for s in range(3)]
+    assert all(a.window < f.window for a, f in zip(adapted, fixed, strict=True))
+    assert all(check_schedule(inst, a.schedule) == [] for a in adapted)
+    assert sum(a.schedule.makespan for a in adapted) <= sum(f.schedule.makespan for f in fixed)
+
+
+@pytest.mark.parametrize("family", ["subteam-heavy", "depot", "traits-return"])
+def test_the_critical_chain_is_what_holds_the_makespan_up(family):
+    # Each task of the chain starts when the one after it in the list ends (a prerequisite,
+    # or a member's previous task and the way from it); the first one ends the schedule.
+    inst = _cell() if family == "subteam-heavy" else family_instance(family, 0, seed=5, num_robots=10, num_tasks=40)
+    inc = left_shift(inst, simulate(inst, GreedyPayloadPolicy()).schedule, State.initial(inst))
+    chain = critical_chain(inst, inc)
+    at = {inst.task_index[a.task]: a for a in inc.assignments}
+    assert len(chain) >= 2 and len(set(chain)) == len(chain)
+    if inst.objective == "makespan":
+        assert at[chain[0]].end == pytest.approx(inc.makespan)
+    for later, earlier in itertools.pairwise(chain):
+        assert at[earlier].end <= at[later].start + 1e-6
+        shares = set(at[earlier].robots) & set(at[later].robots)
+        assert earlier in inst.prerequisites[later] or shares
+        if inst.travel is None:
+            assert at[earlier].end == pytest.approx(at[later].start)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_kind_of_neighbourhood_keeps_the_prerequisites_of_its_tasks_inside(kind):
+    # Prefix, window and later tasks are the tasks up to a point in start order, so every
+    # prerequisite of a task in the model is fixed or in the model too; the window is the
+    # kind's choice: the chain's tasks first, the busiest robot's, or the last ones.
+    inst = family_instance("depot", 0, seed=5, num_robots=10, num_tasks=40)
+    inc = left_shift(inst, simulate(inst, GreedyPayloadPolicy()).schedule, State.initial(inst))
+    by_task = inc.by_task()
+    todo = sorted(range(inst.num_tasks), key=lambda j: (by_task[inst.tasks[j].id].start, j))
+    chain = set(critical_chain(inst, inc))
+    for seed in range(5):
+        prefix, picked, later = _neighbourhood(inst, inc, todo, set(), kind, 6, 1, np.random.default_rng(seed), ())
+        assert len(picked) == len(set(picked)) <= 6 and not set(picked) & set(later)
+        inside = set(prefix) | set(picked) | set(later)
+        assert inside == set(todo[:len(inside)])
+        assert all(set(inst.prerequisites[j]) <= inside for j in inside)
+        if kind == "tail":
+            assert inside == set(todo) and picked == todo[len(prefix):len(prefix) + 6]
+        if kind == "chain":
+            assert chain & set(picked)
+
+
+def test_the_kinds_of_neighbourhood_over_pools_improve_a_bad_start_from_a_fixed_seed(monkeypatch):
+    # Over pools (a PSPLIB project: units of four resources) every kind is drawn over the
+    # rounds, a kind that shortens the schedule more often; with an iteration limit the
+    # result repeats. Per robot the windows are the time and tail kinds alone.
+    drawn: list[str] = []
+
+    def recorded(inst, inc, todo, started, kind, *rest):
+        drawn.append(kind)
+        return _neighbourhood(inst, inc, todo, started, kind, *rest)
+
+    monkeypatch.setattr(lns, "_neighbourhood", recorded)
+    inst = import_psplib(Path(__file__).parents[2] / "examples" / "psplib" / "j301_1.sm")
+    bad = simulate(inst, RandomPolicy(seed=0)).schedule
+    one, two = (improve(inst, bad, max_rounds=12, round_limit=0.1, seed=1, window=10) for _ in range(2))
+    assert one.schedule.makespan < bad.makespan and one.schedule.assignments == two.schedule.assignments
+    assert check_schedule(inst, one.schedule) == [] and set(drawn) == set(KINDS)
+    drawn.clear()
+    improve(_cell(), simulate(_cell(), RandomPolicy(seed=0)).schedule, max_rounds=3, round_limit=0.1)
+    assert drawn and set(drawn) <= {"time", "tail"}
