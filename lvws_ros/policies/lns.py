@@ -207,13 +207,9 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     if inst.travel is None:  # the incumbent, on the tick scale, as the hint (with travel: timed by _hint_travel)
         for j in free:
             model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
-    solver = _solver(solve_by, work, workers, seed)
+    solver, closed = _solve(model, solve_by, work, workers, seed)
     if solver is None:
-        return None, NOT_RUN
-    status = solver.solve(model)
-    if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        return None, CLOSED if status == cp_model.INFEASIBLE else OPEN
-    closed = CLOSED if status == cp_model.OPTIMAL else OPEN
+        return None, closed
     out = _outside(inst, inc, prefix, free, {j: solver.value(start[j]) / scale for j in free})
     for j in free:
         t = inst.tasks[j]
@@ -247,6 +243,20 @@ def _solver(solve_by: float, work: float | None, workers: int, seed: int) -> cp_
     solver.parameters.random_seed = seed
     solver.parameters.cp_model_probing_level = 0  # a neighbourhood's time goes to search, not to probing
     return solver
+
+
+def _solve(model: cp_model.CpModel, solve_by: float, work: float | None, workers: int,
+           seed: int) -> tuple[cp_model.CpSolver | None, int]:
+    """Solve one neighbourhood (:func:`_solver`): the solver holding a solution (None when
+    none was found) and NOT_RUN (no time left), OPEN or CLOSED (proven optimal, or no
+    solution exists)."""
+    solver = _solver(solve_by, work, workers, seed)
+    if solver is None:
+        return None, NOT_RUN
+    status = solver.solve(model)
+    if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        return None, CLOSED if status == cp_model.INFEASIBLE else OPEN
+    return solver, CLOSED if status == cp_model.OPTIMAL else OPEN
 
 
 def _outside(inst: Instance, inc: Schedule, prefix: list[int], free: set[int],
@@ -299,13 +309,9 @@ def _pool_window_model(inst: Instance, state: State, inc: Schedule, found: tuple
         model.add(makespan >= end[j])
         model.add_hint(start[j], min(upper, max(t0, round(by_task[inst.tasks[j].id].start * scale))))
     model.minimize((len(free) * (upper + 1) + 1) * makespan + sum(end.values()))  # the makespan, then the ends
-    solver = _solver(solve_by, work, workers, seed)
+    solver, closed = _solve(model, solve_by, work, workers, seed)
     if solver is None:
-        return None, NOT_RUN
-    status = solver.solve(model)
-    if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
-        return None, CLOSED if status == cp_model.INFEASIBLE else OPEN
-    closed = CLOSED if status == cp_model.OPTIMAL else OPEN
+        return None, closed
     teams: dict[int, list[int]] = {j: [] for j in free}
     for p, pool in enumerate(found):
         tasks = [j for j in free if int(solver.value(count[j][p]) if p in count[j] else 0) > 0]

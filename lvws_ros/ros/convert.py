@@ -275,17 +275,23 @@ def cell_task_to_msg(item: dict[str, Any], k: int = 0) -> CellTask:
         raise ConfigError(f"task {k}: {exc}") from None
 
 
-def cell_task_from_msg(msg: Any) -> dict[str, Any]:
-    """A CellTask as a task entry of the cell config (the inverse of :func:`cell_task_to_msg`)."""
-    entry: dict[str, Any] = {"id": msg.id, "type": msg.type, "object": msg.object, "duration": msg.duration,
-                             "payload": msg.payload, "after": list(msg.after)}
+def _requires_from_msg(msg: Any) -> dict[str, float]:
+    """A task message's ``require_names`` and ``requires`` as the files' ``requires`` map
+    (ConfigError naming the task when they do not pair up)."""
     names, amounts = list(msg.require_names), [float(v) for v in msg.requires]
     if len(names) != len(amounts):
         raise ConfigError(f"task {msg.id!r}: {len(names)} require_names but {len(amounts)} requires")
     if len(set(names)) != len(names):
         raise ConfigError(f"task {msg.id!r}: require_names names a trait twice: {names}")
-    if names:
-        entry["requires"] = dict(zip(names, amounts, strict=True))
+    return dict(zip(names, amounts, strict=True))
+
+
+def cell_task_from_msg(msg: Any) -> dict[str, Any]:
+    """A CellTask as a task entry of the cell config (the inverse of :func:`cell_task_to_msg`)."""
+    entry: dict[str, Any] = {"id": msg.id, "type": msg.type, "object": msg.object, "duration": msg.duration,
+                             "payload": msg.payload, "after": list(msg.after)}
+    if requires := _requires_from_msg(msg):
+        entry["requires"] = requires
     if msg.type == "transport":
         entry.update({"from": msg.source, "to": msg.cell})
     else:
@@ -331,13 +337,8 @@ def instance_task_from_msg(msg: Any) -> dict[str, Any]:
                              "after": list(msg.prerequisites)}
     if len(msg.capabilities):
         entry["capabilities"] = [int(c) for c in msg.capabilities]
-    names, amounts = list(msg.require_names), [float(v) for v in msg.requires]
-    if len(names) != len(amounts):
-        raise ConfigError(f"task {msg.id!r}: {len(names)} require_names but {len(amounts)} requires")
-    if len(set(names)) != len(names):
-        raise ConfigError(f"task {msg.id!r}: require_names names a trait twice: {names}")
-    if names:
-        entry["requires"] = dict(zip(names, amounts, strict=True))
+    if requires := _requires_from_msg(msg):
+        entry["requires"] = requires
     if msg.site and msg.site_to and msg.site_to != msg.site:
         entry.update({"from": msg.site, "to": msg.site_to})
     elif msg.site:
