@@ -159,7 +159,7 @@ class _Reader:
     def forget(self) -> None:
         self._raw, self._info = {}, {}
 
-    def _items(self, items: Any, fields: Any, convert: Any) -> tuple[Any, ...]:
+    def _items(self, items: Any, fields: Any, convert: Any, copy: Any) -> tuple[Any, ...]:
         raw_of, info_of = self._raw, self._info
         raw: dict[str, tuple[Any, ...]] = {}
         info: dict[str, Any] = {}
@@ -172,7 +172,7 @@ class _Reader:
                 got = info_of[key]
             else:
                 got = convert(key, now)
-                now = tuple(v[:] if isinstance(v, _SEQUENCES) else v for v in now)  # copies: a message may be reused
+                now = copy(now)  # a message may be reused
             if key not in raw:  # a duplicate id: the core's check says so
                 raw[key], info[key] = now, got
             out.append(got)
@@ -186,6 +186,14 @@ _task_fields = operator.attrgetter(  # every field of a Task (a C-level read of 
 _robot_fields = operator.attrgetter(  # every field of a RobotState
     "kind", "available", "capabilities", "payload", "current_task", "busy_for", "pose.x", "pose.y", "pose.theta",
     "site", "speed", "traits", "home")
+
+
+def _task_copy(f: tuple[Any, ...]) -> tuple[Any, ...]:  # the fields with their sequences copied
+    return f[0], f[1][:], f[2], f[3], f[4][:], f[5][:], *f[6:12], f[12][:], f[13]
+
+
+def _robot_copy(f: tuple[Any, ...]) -> tuple[Any, ...]:
+    return *f[:2], f[2][:], *f[3:11], f[11][:], f[12]
 
 
 def _task_of_fields(key: str, f: tuple[Any, ...]) -> TaskInfo:
@@ -215,7 +223,7 @@ class GraphReader(_Reader):
                 or not isinstance(tasks[0].requires, _SEQUENCES):
             self.forget()
             return graph_from_msg(msg)
-        return _graph(msg, self._items(tasks, _task_fields, _task_of_fields))
+        return _graph(msg, self._items(tasks, _task_fields, _task_of_fields, _task_copy))
 
 
 class TeamReader(_Reader):
@@ -228,7 +236,7 @@ class TeamReader(_Reader):
             self.forget()
             return team_from_msg(msg)
         return TeamSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names),
-                            self._items(robots, _robot_fields, _robot_of_fields), tuple(msg.trait_names))
+                            self._items(robots, _robot_fields, _robot_of_fields, _robot_copy), tuple(msg.trait_names))
 
 
 def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:
