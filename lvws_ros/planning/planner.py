@@ -10,7 +10,8 @@ there is time.
 2. **improvement rounds**, in turn: while at most ``exact_tasks`` tasks are left to do
    (POOL_EXACT_TASKS where the whole model is the pool model), CP-SAT on the whole rest,
    warm-started from the incumbent, in slices that double from EXACT_FIRST (a proof of
-   optimality ends the improvement), every other round; the other
+   optimality ends the improvement), every other round, or the next round too when its
+   last slice shortened the plan; the other
    rounds, and every round on a larger rest, large-neighbourhood search on the incumbent
    (:func:`~lvws_ros.policies.lns.improve`, travel and the way home included; its window
    adapts to what CP-SAT proves in a round's time and is kept from round to round) for a
@@ -117,6 +118,7 @@ class Planner:
         self.exact_rounds = 0  # CP-SAT solves from the plan's state
         self.lns_rounds = 0  # LNS rounds from the plan's state
         self.exact_overran = False  # CP-SAT's whole model took far longer than its slice (too large: LNS instead)
+        self.exact_shortened = False  # its last slice shortened the plan: the next round is its too (a longer slice)
         self.unimproved = 0  # improvement rounds in a row that did not shorten the plan
         self.lns_window: int | None = None  # the neighbourhood size LNS adapted to last (None: its default)
         self._pooled: bool | None = None  # the cell's whole model is the pool model (None: not asked yet)
@@ -200,7 +202,7 @@ class Planner:
         if due:  # the world departed from the plan: CP-SAT's bound and proofs no longer hold, the search starts over
             self.proven, self.bound = False, self.base_bound
             self.exact_closed, self.exact_rounds, self.lns_rounds, self.unimproved = False, 0, 0, 0
-            self.exact_overran = False
+            self.exact_overran = self.exact_shortened = False
         if due and quick:
             self.quick_plans(state, deadline)
         if self.plan is None:  # nothing yet (or not even a quick plan fitted): GRP's, however long it takes
@@ -248,7 +250,7 @@ class Planner:
         end = time.perf_counter() + self.slice if deadline is None else min(deadline, time.perf_counter() + self.slice)
         if self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
             shorter = self._sample(state, todo, end)
-        elif self._whole(todo) and not self.exact_closed and self.exact_rounds <= self.lns_rounds:
+        elif self._whole(todo) and not self.exact_closed and (self.exact_rounds <= self.lns_rounds or self.exact_shortened):
             shorter = self._exact(state, end, deadline)
         else:  # a larger rest, or every other round on a small one (CP-SAT's whole model may find nothing there)
             self.lns_rounds += 1
@@ -308,6 +310,7 @@ class Planner:
         if res.schedule is None:
             return False
         shorter = self.offer_schedule(res.schedule, "exact")
+        self.exact_shortened = shorter
         # optimal in CP-SAT's model: solving it again gives nothing new; or a model that took far
         # longer than its slice to build and shortened nothing (e.g. 20 robots x 50 tasks with
         # travel: seconds to build): its rounds go to LNS from here on

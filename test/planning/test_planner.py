@@ -5,6 +5,7 @@ and with an iteration limit (no time limit) it is deterministic."""
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from lvws_ros.core.datasets import DATASETS, dataset_instance, subteam_heavy_ins
 from lvws_ros.core.executor import State, TaskStatus, advance, simulate
 from lvws_ros.core.families import family_test_split
 from lvws_ros.core.formats import instance_from_dict, instance_to_dict
+from lvws_ros.core.importers import import_psplib
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.planning.follow import PlanFollower, repair
@@ -193,3 +195,20 @@ def test_the_sampling_temperature_cools_with_the_tasks_to_do():
     assert sampling_temperature(10) == pytest.approx(0.1)
     assert sampling_temperature(500) == pytest.approx(0.004)
     assert sampling_temperature(5000) < sampling_temperature(500)
+
+
+def test_cp_sat_keeps_the_next_round_while_its_slices_shorten_the_plan():
+    # A PSPLIB project (the pool model): a slice of CP-SAT's whole model that shortens the
+    # plan is followed by another (a longer one), not by a round of neighbourhoods; rounds
+    # alternate once a slice shortened nothing.
+    inst = import_psplib(Path(__file__).parents[2] / "examples" / "psplib" / "j1201_1.sm")
+    planner = Planner(seed=0, workers=1, learned=False, work=0.5)
+    planner.run(State.initial(inst), iterations=1)
+    assert (planner.exact_rounds, planner.lns_rounds) == (1, 0) and planner.exact_shortened
+    while planner.exact_shortened and planner.exact_rounds < 4:
+        rounds = planner.exact_rounds
+        planner.improve()
+        assert (planner.exact_rounds, planner.lns_rounds) == (rounds + 1, 0)
+    if not planner.exact_shortened:
+        planner.improve()
+        assert planner.lns_rounds == 1
