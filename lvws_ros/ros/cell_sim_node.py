@@ -256,7 +256,7 @@ class CellSimNode(Node):
 
     def start(self) -> None:
         """Once the scheduler and recorder subscribe (or the wait is over): the first state."""
-        subs = min(self.team_pub.get_subscription_count(), self.graph_pub.get_subscription_count())
+        subs = topics.state_audience(self.team_pub, self.graph_pub)
         if subs < self.expect_subs and time.monotonic() - self.start_wall < self.wait_subs:
             return  # give the scheduler and recorder time to discover us
         self.started = True

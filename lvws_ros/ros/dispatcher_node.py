@@ -149,10 +149,10 @@ class DispatcherNode(Node):
         the first state."""
         if not self.waiting:
             return True
-        if self.team_pub.get_subscription_count() >= self.expect_subs or \
-                time.monotonic() - self.started_wall > WAIT_FOR_SUBSCRIBERS:
+        subs = topics.state_audience(self.team_pub, self.graph_pub)
+        if subs >= self.expect_subs or time.monotonic() - self.started_wall > WAIT_FOR_SUBSCRIBERS:
             self.waiting = False
-            self.get_logger().info(f"publishing to {self.team_pub.get_subscription_count()} subscriber(s)")
+            self.get_logger().info(f"publishing to {subs} subscriber(s)")
         return not self.waiting
 
     def apply(self, out: Outcome) -> None:

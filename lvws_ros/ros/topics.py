@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 TEAM_TOPIC = "lvws/team_state"
@@ -65,3 +66,10 @@ def message_class(type_name: str) -> Any:
     """The rclpy message class of 'pkg/msg/Name'."""
     pkg, kind, name = type_name.split("/")
     return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+
+
+def state_audience(team_pub: Publisher, graph_pub: Publisher) -> int:
+    """How many nodes take a world's state: the fewer of the TeamState and TaskGraph
+    subscribers (a recorder matched on one topic and not yet on the other would miss the
+    first state on the other)."""
+    return min(team_pub.get_subscription_count(), graph_pub.get_subscription_count())
