@@ -380,8 +380,8 @@ def critical_chain(inst: Instance, inc: Schedule) -> list[int]:
     return chain
 
 
-def _neighbourhood(inst: Instance, inc: Schedule, todo: list[int], started: set[int], kind: str, window: int,
-                   later_windows: int, rng: np.random.Generator,
+def _neighbourhood(inst: Instance, inc: Schedule, by_task: dict[str, Assignment], todo: list[int], started: set[int],
+                   kind: str, window: int, later_windows: int, rng: np.random.Generator,
                    found: tuple[Pool, ...]) -> tuple[list[int], list[int], list[int]]:
     """A neighbourhood of ``kind`` (KINDS): the prefix (fixed), the window (re-planned) and
     the later tasks (kept, moved). It spans ``window * (1 + later_windows)`` consecutive
@@ -393,9 +393,10 @@ def _neighbourhood(inst: Instance, inc: Schedule, todo: list[int], started: set[
     * ``chain``: around a random task of the critical chain (:func:`critical_chain`), the
       window its chain tasks first, then the tasks sharing a robot with them;
     * ``busy``: from a random task on, the window the tasks of the robot (over pools: the
-      pool) busiest over the span first."""
+      pool) busiest over the span first.
+
+    ``by_task``: ``inc``'s assignments by task; ``todo``: the tasks not started, by start."""
     span = window * (1 + later_windows)
-    by_task = inc.by_task()
     starts = [by_task[inst.tasks[j].id].start for j in todo]
     position = {j: i for i, j in enumerate(todo)}
     first: list[int] = []  # the tasks the window takes first, in this order
@@ -493,7 +494,8 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
             kind = KINDS[int(rng.choice(len(KINDS), p=weights / weights.sum()))]
         else:  # per robot, a third of the windows end the schedule, the rest from random times
             kind = "tail" if rounds % 3 == 2 else "time"
-        prefix, picked, later = _neighbourhood(inst, best, todo, started, kind, window, later_windows, rng, found)
+        prefix, picked, later = _neighbourhood(inst, best, by_task, todo, started, kind, window, later_windows,
+                                               rng, found)
         whole = len(todo) <= window  # the whole rest fits one window: one solve says all, with all the time left
         solve_by = time.perf_counter() + (left if whole else min(round_limit, left))
         work = None if max_rounds is None else round_limit

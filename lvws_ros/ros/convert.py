@@ -159,6 +159,16 @@ class _Reader:
     def forget(self) -> None:
         self._raw, self._info = {}, {}
 
+    def _plain(self, items: Any, last_field: str, sequences: tuple[str, str]) -> bool:
+        """Whether ``items`` can be read field by field: there are some, the first has the
+        message's newest field ``last_field``, and its ``sequences`` are plain sequences
+        (not a bag reader's arrays). If not, what was kept is forgotten."""
+        if items and hasattr(items[0], last_field) and all(isinstance(getattr(items[0], f), _SEQUENCES)
+                                                          for f in sequences):
+            return True
+        self.forget()
+        return False
+
     def _items(self, items: Any, fields: Any, convert: Any, copy: Any) -> tuple[Any, ...]:
         raw_of, info_of = self._raw, self._info
         raw: dict[str, tuple[Any, ...]] = {}
@@ -219,9 +229,7 @@ class GraphReader(_Reader):
 
     def read(self, msg: Any) -> GraphSnapshot:
         tasks = msg.tasks
-        if not tasks or not hasattr(tasks[0], "requires") or not isinstance(tasks[0].capabilities, _SEQUENCES) \
-                or not isinstance(tasks[0].requires, _SEQUENCES):
-            self.forget()
+        if not self._plain(tasks, "requires", ("capabilities", "requires")):
             return graph_from_msg(msg)
         return _graph(msg, self._items(tasks, _task_fields, _task_of_fields, _task_copy))
 
@@ -231,9 +239,7 @@ class TeamReader(_Reader):
 
     def read(self, msg: Any) -> TeamSnapshot:
         robots = msg.robots
-        if not robots or not hasattr(robots[0], "home") or not isinstance(robots[0].capabilities, _SEQUENCES) \
-                or not isinstance(robots[0].traits, _SEQUENCES):
-            self.forget()
+        if not self._plain(robots, "home", ("capabilities", "traits")):
             return team_from_msg(msg)
         return TeamSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names),
                             self._items(robots, _robot_fields, _robot_of_fields, _robot_copy), tuple(msg.trait_names))

@@ -219,7 +219,7 @@ def test_every_kind_of_neighbourhood_keeps_the_prerequisites_of_its_tasks_inside
     todo = sorted(range(inst.num_tasks), key=lambda j: (by_task[inst.tasks[j].id].start, j))
     chain = set(critical_chain(inst, inc))
     for seed in range(5):
-        prefix, picked, later = _neighbourhood(inst, inc, todo, set(), kind, 6, 1, np.random.default_rng(seed), ())
+        prefix, picked, later = _neighbourhood(inst, inc, by_task, todo, set(), kind, 6, 1, np.random.default_rng(seed), ())
         assert len(picked) == len(set(picked)) <= 6 and not set(picked) & set(later)
         inside = set(prefix) | set(picked) | set(later)
         assert inside == set(todo[:len(inside)])
@@ -236,9 +236,9 @@ def test_the_kinds_of_neighbourhood_over_pools_improve_a_bad_start_from_a_fixed_
     # result repeats. Per robot the windows are the time and tail kinds alone.
     drawn: list[str] = []
 
-    def recorded(inst, inc, todo, started, kind, *rest):
+    def recorded(inst, inc, by_task, todo, started, kind, *rest):
         drawn.append(kind)
-        return _neighbourhood(inst, inc, todo, started, kind, *rest)
+        return _neighbourhood(inst, inc, by_task, todo, started, kind, *rest)
 
     monkeypatch.setattr(lns, "_neighbourhood", recorded)
     inst = import_psplib(Path(__file__).parents[2] / "examples" / "psplib" / "j301_1.sm")

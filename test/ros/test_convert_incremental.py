@@ -72,36 +72,31 @@ TEAM_CHANGES = {
 }
 
 
+def _read_through(reader, snapshot, to_msg, from_msg, items, changes, steps):
+    """Feed ``reader`` the messages of ``snapshot`` after each of ``steps`` (names of
+    ``changes``): each snapshot read equals the whole conversion's, and an unchanged item
+    (``items`` of a snapshot) is the very object of the message before."""
+    before = reader.read(to_msg(snapshot))
+    for n, change in enumerate(steps):
+        snapshot = dataclasses.replace(changes[change](snapshot), stamp=float(n + 1))
+        msg = to_msg(snapshot)
+        got = reader.read(msg)
+        assert got == from_msg(msg)
+        old = {x.id: x for x in items(before)}
+        assert all(x is old[x.id] for x in items(got) if x.id in old and x == old[x.id])
+        before = got
+
+
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.sampled_from(sorted(GRAPH_CHANGES)), min_size=1, max_size=6))
 def test_the_graph_reader_equals_the_whole_conversion_after_any_changes(changes: list[str]) -> None:
-    reader, g = GraphReader(), graph()
-    before = reader.read(graph_to_msg(g))
-    for n, change in enumerate(changes):
-        g = dataclasses.replace(GRAPH_CHANGES[change](g), stamp=float(n + 1))
-        msg = graph_to_msg(g)
-        got = reader.read(msg)
-        assert got == graph_from_msg(msg)
-        old = {t.id: t for t in before.tasks}
-        for t in got.tasks:  # an unchanged task is the very object of the message before
-            if t.id in old and t == old[t.id]:
-                assert t is old[t.id]
-        before = got
+    _read_through(GraphReader(), graph(), graph_to_msg, graph_from_msg, lambda g: g.tasks, GRAPH_CHANGES, changes)
 
 
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.sampled_from(sorted(TEAM_CHANGES)), min_size=1, max_size=5))
 def test_the_team_reader_equals_the_whole_conversion_after_any_changes(changes: list[str]) -> None:
-    reader, t = TeamReader(), team()
-    before = reader.read(team_to_msg(t))
-    for n, change in enumerate(changes):
-        t = dataclasses.replace(TEAM_CHANGES[change](t), stamp=float(n + 1))
-        msg = team_to_msg(t)
-        got = reader.read(msg)
-        assert got == team_from_msg(msg)
-        old = {r.id: r for r in before.robots}
-        assert all(r is old[r.id] for r in got.robots if r.id in old and r == old[r.id])
-        before = got
+    _read_through(TeamReader(), team(), team_to_msg, team_from_msg, lambda t: t.robots, TEAM_CHANGES, changes)
 
 
 def test_a_reused_message_changed_in_place_is_read_again() -> None:
