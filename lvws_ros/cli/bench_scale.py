@@ -8,6 +8,9 @@ nothing asserted.
 * scheduler-node decision latency p50/p99 at 100 x 500: the node's work without DDS
   (message -> snapshot conversion of both messages, OnlineScheduler.decide) at each
   decision step of a whole run, with travel (sites in the messages) on the depot family;
+  the node's ``auto`` also split by what decided (the first decision, GRP before the first
+  plan, the plan), back to back and paced as a cell whose tasks take time
+  (``python -m lvws_ros.cli.bench_scale --latency FAMILY N M SEED PACE`` for one row);
 * the exact expert on 24-40 robots x 30 tasks (subteam-heavy): status, bound and gap in 60 s;
 * large-neighbourhood search from GRP's schedule at 30 x 100 and 100 x 500 (60 s each).
 """
@@ -103,10 +106,15 @@ def bench_whole_schedules(seed: int, limit: float) -> None:
                           f"{'yes' if r['valid'] else 'NO'} | {r['peak_mib']:.0f} |", flush=True)
 
 
-def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: bool = True) -> list[float]:
+def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: bool = True,
+                 pace: float = 0.0) -> list[tuple[float, str]]:
     """Seconds per decision of the scheduler node's work (both messages converted to
-    snapshots, OnlineScheduler.decide), at each decision step of a whole run; after a
-    warm-up run on a small instance (a running node has made decisions before)."""
+    snapshots, OnlineScheduler.decide), at each decision step of a whole run, with what
+    decided it (``auto-planner``: "first" for the cell's first decision, which waits for the
+    first plan; "grp" for one taken before any plan arrived; "plan" for one taken from the
+    plan; any other policy: its name); after a warm-up run on a small instance (a running
+    node has made decisions before). ``pace``: wall seconds per unit of the instance's time
+    between two decisions, as a cell whose tasks take time gives its planner (0: none)."""
     if warm_up:
         node_latency(policy, family, 10, 20, seed + 1, warm_up=False)
     from lvws_ros.core.executor import State, TaskStatus
@@ -119,6 +127,9 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     online = OnlineScheduler(make_policy("auto", seed=seed, background=True) if planner else make_policy(policy, seed=seed),
                              ack_timeout=1e9)
     gc.freeze()  # as the scheduler node does after start-up
+    process = getattr(online.policy, "process", None)
+    if process is not None:  # started at the node's configure, so ready before its cell's first state (or the
+        process.wait_ready(60.0)  # first decision waits for it: a node started at once with its world)
     state = State.initial(inst)
     names = tuple(inst.capabilities)
     tr = inst.travel  # with travel, the snapshots carry sites as the simulator's do (sim/world.py)
@@ -132,7 +143,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     def task_sites(j: int) -> tuple[str, str]:
         return ("", "") if tr is None else (tr.sites[tr.task_from[j]], tr.sites[tr.task_to[j]])
 
-    lat: list[float] = []
+    lat: list[tuple[float, str]] = []
     team_reader, graph_reader = convert.TeamReader(), convert.GraphReader()  # as the node reads its messages
     while not state.done():
         free = state.robot_available()
@@ -149,14 +160,19 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
         t0 = time.perf_counter()
         online.offer_team(team_reader.read(team_msg))
         online.offer_graph(graph_reader.read(graph_msg))
+        fallbacks = getattr(online.policy, "fallbacks", 0)
         d = online.decide(started=t0)  # the budget counts from the messages' arrival, as in the node
-        lat.append(time.perf_counter() - t0)
+        source = policy if not planner else "first" if not lat else \
+            "grp" if getattr(online.policy, "fallbacks", 0) > fallbacks else "plan"
+        lat.append((time.perf_counter() - t0, source))
         for tid, robots in d.assignments if d else ():
             state.start(inst.task_index[tid], [inst.robot_index[r] for r in robots])
         online.pending.clear()  # the world took them: the next snapshot says so
         nxt = state.next_event_time()
         if nxt is None:
             raise RuntimeError(f"{policy}: no progress at t={state.time}")
+        if pace > 0:  # the tasks take time: the planner works meanwhile
+            time.sleep(pace * (nxt - state.time))
         state.time = nxt
         state.refresh()
         if (state.task_status == TaskStatus.ASSIGNED).sum() == 0 and state.done():
@@ -174,9 +190,34 @@ def bench_node_latency(seed: int) -> None:
           "its planner in a process beside, each decision dispatched from its latest plan (the first waits <= 1 s).")
     for family in (*FAMILIES, *TRAVEL_FAMILIES):
         for policy in ("grp", "lvws", "auto", "auto-planner"):
-            lat = [1000 * x for x in node_latency(policy, family, 100, 500, seed)]
+            lat = [1000 * x for x, _ in node_latency(policy, family, 100, 500, seed)]
             print(f"| {family} | {policy} | {len(lat)} | {statistics.median(lat):.1f} | "
                   f"{float(np.percentile(lat, 99)):.1f} | {max(lat):.1f} |", flush=True)
+    print("\n`auto-planner` by what decided (the first decision waits <= 1 s for the first plan; `grp`: no plan "
+          "had arrived yet; `plan`: dispatched from it); back to back, and paced as a cell whose time unit takes "
+          f"{PACE:g} s of wall time")
+    print("| family | N x M | pace s | first ms | grp: decisions, p99 ms | plan: decisions, p50 ms, p99 ms, max ms |")
+    print("|---|---|---|---|---|---|")
+    for family in (*FAMILIES, *TRAVEL_FAMILIES):
+        for pace in (0.0, PACE):
+            print(latency_by_source(family, 100, 500, seed, pace), flush=True)
+
+
+PACE = 0.25  # wall seconds per unit of an instance's time in the paced latency rows
+
+
+def latency_by_source(family: str, n: int, m: int, seed: int, pace: float) -> str:
+    """A table row of :func:`node_latency` for the node's ``auto``, split by what decided."""
+    lat = node_latency("auto-planner", family, n, m, seed, pace=pace)
+    first = [1000 * x for x, s in lat if s == "first"]
+    grp = [1000 * x for x, s in lat if s == "grp"]
+    plan = [1000 * x for x, s in lat if s == "plan"]
+
+    def p99(xs: list[float]) -> str:
+        return f"{float(np.percentile(xs, 99)):.1f}" if xs else "-"
+
+    return (f"| {family} | {n} x {m} | {pace:g} | {first[0]:.0f} | {len(grp)}, {p99(grp)} | {len(plan)}, "
+            f"{statistics.median(plan) if plan else float('nan'):.1f}, {p99(plan)}, {max(plan, default=float('nan')):.1f} |")
 
 
 def bench_exact_large_teams(seed: int, time_limit: float = 60.0, workers: int = 2) -> None:
@@ -236,5 +277,8 @@ if __name__ == "__main__":
     if sys.argv[1:2] == ["--one"]:
         policy, family, n, m, seed = sys.argv[2:7]
         print(json.dumps(one_run(policy, family, int(n), int(m), int(seed))))
+    elif sys.argv[1:2] == ["--latency"]:  # one row of the node's auto by what decided: FAMILY N M SEED PACE
+        family, n, m, seed, pace = sys.argv[2:7]
+        print(latency_by_source(family, int(n), int(m), int(seed), float(pace)))
     else:
         main()
