@@ -98,8 +98,8 @@ class DispatcherNode(Node):
         self.frame_id = str(_param(self, "frame_id", "map", "frame of the robots' poses and the sites"))
         self.exit_when_done = bool(_param(self, "exit_when_done", False, "exit 0 once every task is done"))
         self.summary_path = str(_param(self, "summary", "", "where to write the JSON summary at exit"))
-        self.expect_subs = int(_param(self, "expect_subscribers", 0, "publish the team once this many nodes "
-                                      "subscribe to it (the scheduler, a recorder), or after 20 s"))
+        self.expect_subs = int(_param(self, "expect_subscribers", 0, "publish the state once this many nodes "
+                                      "subscribe to its team and task graph (the scheduler, a recorder), or after 20 s"))
         if not path:
             raise ConfigError("no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
         self.cell_path = path
