@@ -19,6 +19,7 @@ import time
 
 import rclpy
 from lvws_msgs.action import ExecuteTask
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -86,9 +87,13 @@ def main(argv: list[str] | None = None) -> int:
     executor = MultiThreadedExecutor()
     executor.add_node(node)
     try:
-        executor.spin()
+        while rclpy.ok():  # looks at shutdown (Ctrl-C, SIGTERM) at least every 0.5 s
+            executor.spin_once(timeout_sec=0.5)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:  # the signal came while the executor made its wait set
+        if rclpy.ok():
+            raise
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

@@ -64,6 +64,7 @@ __all__ = [
 ACTION_NAME = "execute_task"  # each robot's server: <robot id>/execute_task
 PHASES = (ExecuteTask.Feedback.PHASE_TRAVELLING, ExecuteTask.Feedback.PHASE_WAITING,
           ExecuteTask.Feedback.PHASE_WORKING)
+SHUTDOWN_CHECK = 0.5  # wall seconds between two looks at whether a signal shut the servers down
 POLL_SECONDS = 0.02  # how often TaskFeedback.sleep looks for a cancel request (wall seconds)
 
 
@@ -294,7 +295,8 @@ def serve(servers: Sequence[Node], threads: int | None = None) -> int:
     for node in servers:
         executor.add_node(node)
     try:
-        executor.spin()
+        while context.ok():  # not executor.spin(): a shutdown whose wake-up came while the executor was
+            executor.spin_once(timeout_sec=SHUTDOWN_CHECK)  # between waits would leave it waiting for the next event
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RCLError:
