@@ -20,7 +20,7 @@ from samples import BASE
 @pytest.mark.parametrize("name", ["lvws", "dbgm"])
 def test_wide_instances_past_the_old_dense_limit_schedule(name):
     m = 16_000  # the first model refused more than about 14,000 tasks
-    n = 1000
+    n = 250  # a layer of tasks per robot at each step: 64 steps (the matching's work grows with robots squared)
     inst = Instance("wide", ("a",), tuple(Robot(f"r{i}", (1,), 1.0) for i in range(n)),
                     tuple(Task(f"t{j}", (1,), 1.0, 1.0, (f"t{j - n}",) if j >= n else ()) for j in range(m)))
     sched = simulate(inst, make_policy(name)).schedule
