@@ -112,9 +112,10 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     snapshots, OnlineScheduler.decide), at each decision step of a whole run, with what
     decided it (``auto-planner``: "first" for the cell's first decision, which waits for the
     first plan; "grp" for one taken before any plan arrived; "plan" for one taken from the
-    plan; any other policy: its name); after a warm-up run on a small instance (a running
-    node has made decisions before). ``pace``: wall seconds per unit of the instance's time
-    between two decisions, as a cell whose tasks take time gives its planner (0: none)."""
+    plan; "none" for a step where no decision was due; any other policy: its name); after a
+    warm-up run on a small instance (a running node has made decisions before). ``pace``:
+    wall seconds per unit of the instance's time between two decisions, as a cell whose
+    tasks take time gives its planner (0: none)."""
     if warm_up:
         node_latency(policy, family, 10, 20, seed + 1, warm_up=False)
     from lvws_ros.core.executor import State, TaskStatus
@@ -162,9 +163,16 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
         online.offer_graph(graph_reader.read(graph_msg))
         fallbacks = getattr(online.policy, "fallbacks", 0)
         d = online.decide(started=t0)  # the budget counts from the messages' arrival, as in the node
-        source = policy if not planner else "first" if not lat else \
-            "grp" if getattr(online.policy, "fallbacks", 0) > fallbacks else "plan"
-        lat.append((time.perf_counter() - t0, source))
+        seconds = time.perf_counter() - t0
+        if not planner:
+            source = policy
+        elif d is None:  # no decision due (nothing ready for the free robots): the messages' reading alone
+            source = "none"
+        elif all(s == "none" for _, s in lat):
+            source = "first"
+        else:
+            source = "grp" if getattr(online.policy, "fallbacks", 0) > fallbacks else "plan"
+        lat.append((seconds, source))
         for tid, robots in d.assignments if d else ():
             state.start(inst.task_index[tid], [inst.robot_index[r] for r in robots])
         online.pending.clear()  # the world took them: the next snapshot says so
@@ -216,7 +224,8 @@ def latency_by_source(family: str, n: int, m: int, seed: int, pace: float) -> st
     def p99(xs: list[float]) -> str:
         return f"{float(np.percentile(xs, 99)):.1f}" if xs else "-"
 
-    return (f"| {family} | {n} x {m} | {pace:g} | {first[0]:.0f} | {len(grp)}, {p99(grp)} | {len(plan)}, "
+    pace_text = f"{pace:g}" if pace > 0 else "back to back"
+    return (f"| {family} | {n} x {m} | {pace_text} | {first[0]:.0f} | {len(grp)}, {p99(grp)} | {len(plan)}, "
             f"{statistics.median(plan) if plan else float('nan'):.1f}, {p99(plan)}, {max(plan, default=float('nan')):.1f} |")
 
 

@@ -1,12 +1,13 @@
 """The learned policies have no size limit of their own (sparse task graph, reward
-entries in bounded chunks: see docs/scale.md for 1,000 robots x 5,000 tasks); a team far
-past the old dense limit schedules; and huge but legal numbers never make the learned
-policies stall."""
+entries in bounded chunks: see docs/scale.md for 1,000 robots x 5,000 tasks); a task set far
+past the old dense limit schedules; the chunks change no reward; and huge but legal numbers
+never make the learned policies stall."""
 
 from __future__ import annotations
 
 import copy
 
+import numpy as np
 import pytest
 
 from lvws_ros.core.executor import simulate
@@ -25,6 +26,28 @@ def test_wide_instances_past_the_old_dense_limit_schedule(name):
                     tuple(Task(f"t{j}", (1,), 1.0, 1.0, (f"t{j - n}",) if j >= n else ()) for j in range(m)))
     sched = simulate(inst, make_policy(name)).schedule
     assert check_schedule(inst, sched) == [] and sched.makespan == m // n
+
+
+def test_the_rewards_in_small_chunks_equal_the_rewards_in_one(monkeypatch):
+    # The fleet-scale chunks (robot attention rows, reward entries; the network DBGM shares)
+    # split a decision's tensors, not its arithmetic: tiny chunks give the rewards and wait
+    # logits of one chunk.
+    from lvws_ros.core.executor import State
+    from lvws_ros.core.families import family_instance
+    from lvws_ros.learning import gatn
+
+    inst = family_instance("depot", 0, seed=3, num_robots=40, num_tasks=80)
+    policy = make_policy("lvws")
+    state = State.initial(inst)
+    whole_r, whole_wait = policy.outputs(state)
+    assert whole_r.shape[0] > 7 and whole_r.size > 64  # several chunks below
+    monkeypatch.setattr(gatn, "ROW_CHUNK", 7)
+    monkeypatch.setattr(gatn, "ENTRY_CHUNK", 64)
+    r, wait = policy.outputs(state)
+    np.testing.assert_allclose(r, whole_r, rtol=1e-5, atol=1e-5)
+    assert (wait is None) == (whole_wait is None)
+    if wait is not None:
+        np.testing.assert_allclose(wait, whole_wait, rtol=1e-5, atol=1e-5)
 
 
 @pytest.mark.parametrize("name", ["lvws", "dbgm", "lvws_rollout", "lvws_beam"])
