@@ -37,3 +37,30 @@ def test_stop_ends_a_child_and_a_sender_blocked_on_full_pipes() -> None:
     finally:
         if child is not None and child.is_alive():
             child.kill()
+
+
+def test_latest_hands_over_the_newest_plan_of_those_that_arrived() -> None:
+    # The child sends a plan for each state; the parent, reading late, gets only the plan of
+    # the newest state (the older ones are dropped unread), and a valid one.
+    from lvws_ros.core.schedule import check_schedule
+
+    inst = subteam_heavy_instance(np.random.default_rng(1), 10, 30, "newest")
+    proc = PlannerProcess(seed=0, workers=1, learned=False)
+    proc.start()
+    try:
+        assert proc.wait_ready(60.0)
+        state = State.initial(inst)
+        proc.send(state)
+        first = proc.latest(30.0)
+        assert first is not None and first.seq == 1
+        for _ in range(3):  # three more states, each answered with a plan, before the parent reads
+            proc.send(state)
+            time.sleep(1.0)
+        update = proc.latest(30.0)
+        deadline = time.monotonic() + 30.0
+        while update is not None and update.seq < 4 and time.monotonic() < deadline:  # a slow child, still at it
+            update = proc.latest(5.0) or update
+        assert update is not None and update.seq == proc.sent == 4
+        assert check_schedule(inst, update.schedule) == []
+    finally:
+        proc.stop()
