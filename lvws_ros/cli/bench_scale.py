@@ -201,7 +201,7 @@ def bench_node_latency(seed: int) -> None:
             lat = [1000 * x for x, _ in node_latency(policy, family, 100, 500, seed)]
             print(f"| {family} | {policy} | {len(lat)} | {statistics.median(lat):.1f} | "
                   f"{float(np.percentile(lat, 99)):.1f} | {max(lat):.1f} |", flush=True)
-    print("\n`auto-planner` by what decided (the first decision waits <= 1 s for the first plan; `grp`: no plan "
+    print("\n`auto-planner` by what decided (the first decision waits 1 s for the best plan; `grp`: no plan "
           "had arrived yet; `plan`: dispatched from it); back to back, and paced as a cell whose time unit takes "
           f"{PACE:g} s of wall time")
     print("| family | N x M | pace s | first ms | grp: decisions, p99 ms | plan: decisions, p50 ms, p99 ms, max ms |")

@@ -14,9 +14,9 @@ Messages (pickled over a one-way :func:`multiprocessing.Pipe` each way): to the 
 ``("cell", Instance)``, ``("state", seq, StatePayload)``, ``("stop",)``; to the parent
 ``("ready",)`` once, then ``("plan", bytes)``: a :class:`PlanUpdate` pickled by the child
 (``seq``: the number of the state the plan is made from), which :meth:`PlannerProcess.latest`
-unpickles only when it is the newest that arrived. As with every ``spawn`` start, a script that starts the planner must
-guard its own work with ``if __name__ == "__main__":`` (the child imports the parent's
-main module); the package's entry points do.
+unpickles only when it is the newest that arrived. As with every ``spawn`` start, a script
+that starts the planner must guard its own work with ``if __name__ == "__main__":`` (the
+child imports the parent's main module); the package's entry points do.
 """
 
 from __future__ import annotations
