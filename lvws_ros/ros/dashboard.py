@@ -341,19 +341,23 @@ class LiveFeed:
     def call(self, kind: str, *, tasks: list[dict[str, Any]] | None = None, target: str = "",
              failed: bool = True, timeout: float = 10.0) -> tuple[bool, str]:
         """One of the simulator's services; (accepted, its message)."""
+        from lvws_ros.ros.service_call import call, ready
         from lvws_ros.ros.world_client import SERVICES, world_request
 
         srv, request = world_request(kind, tasks=tasks or [], target=target, failed=failed)
         client = self.node.create_client(srv, SERVICES[kind])
         try:
-            if not client.wait_for_service(timeout_sec=timeout):
+            if not ready(client, timeout):
                 return False, f"no simulator answers on {client.srv_name}"
-            done = threading.Event()
-            future = client.call_async(request)
-            future.add_done_callback(lambda _f: done.set())
-            if not done.wait(timeout):
+
+            def wait(future: Any, seconds: float) -> bool:  # the executor's thread completes it
+                done = threading.Event()
+                future.add_done_callback(lambda _f: done.set())
+                return done.wait(seconds)
+
+            res = call(client, request, wait, timeout)  # sent once: a change is not repeated
+            if res is None:
                 return False, f"{client.srv_name}: no answer within {timeout:g} s"
-            res = future.result()
             return bool(res.success), str(res.message)
         finally:
             self.node.destroy_client(client)

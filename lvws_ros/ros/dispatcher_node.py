@@ -16,7 +16,11 @@ for as long) fails the task: the other members' goals are cancelled, the task is
 again and the robot leaves TeamState. It comes back when its server answers again: after
 ``rejoin_after`` seconds for a robot that rejected or aborted; for one that went silent,
 once a new server is up under its name (a restarted robot), its server was seen gone
-and is back, or it ends its lost goal after all (a lost goal is cancelled too). Every
+and is back, it ends its lost goal after all, or its server answers a request to cancel
+the lost goal. That request goes to the action's ``cancel_goal`` service every
+``robot_timeout`` seconds until one is answered: a robot whose goal, or whose answers,
+were lost on the way (DDS drops what is sent before both ends have matched) is alive,
+and a dead one never answers, even while its server's endpoints linger. Every
 goal's events go to ``lvws/goal_events`` (lvws_msgs/GoalEvent); what the dispatcher
 refuses (an assignment naming an unknown robot or task, a busy robot) or ignores (a
 result or feedback of a goal already over) is logged and reported on ``diagnostics``
@@ -35,20 +39,25 @@ import argparse
 import json
 import sys
 import time
+import uuid
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import rclpy
-from action_msgs.msg import GoalStatus
+from action_msgs.msg import GoalInfo, GoalStatus
+from action_msgs.srv import CancelGoal
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lvws_msgs.action import ExecuteTask
 from lvws_msgs.msg import AssignmentArray, GoalEvent, TaskGraph, TeamState
 from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitInstanceTasks
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.action import ActionClient
+from rclpy.client import Client
 from rclpy.node import Node
+from rclpy.task import Future
+from unique_identifier_msgs.msg import UUID
 
 from lvws_ros.core.dispatch import Dispatch, GoalKind, GoalSpec, Outcome
 from lvws_ros.core.formats import load_instance
@@ -78,11 +87,15 @@ class _Server:
 
     client: ActionClient
     status_topic: str
+    probe: Client  # the action's cancel_goal service: does the server answer?
     up_since: float | None = None  # wall (steady) seconds
     last_up: float = -1e18
     seen_down: bool = False  # since the robot left the team
     dead: frozenset[bytes] = frozenset()  # its server's endpoints when it went silent
     handles: dict[int, Any] = field(default_factory=dict)  # goal key -> ClientGoalHandle
+    asking: Future | None = None  # the probe in flight
+    asked: float = -1e18  # wall (steady) seconds it was sent
+    answered: bool = False  # the server answered a probe since the robot left the team
 
 
 class DispatcherNode(Node):
@@ -114,9 +127,12 @@ class DispatcherNode(Node):
         self.create_service(CancelTask, "cancel_task", self.on_cancel)
         self.create_service(SetRobotFault, "set_robot_fault", self.on_fault)
         self.servers = {r.id: _Server(ActionClient(self, ExecuteTask, f"{r.id}/{ACTION}"),
-                                      self.resolve_topic_name(f"{r.id}/{ACTION}") + "/_action/status")
+                                      self.resolve_topic_name(f"{r.id}/{ACTION}") + "/_action/status",
+                                      self.create_client(CancelGoal, f"{r.id}/{ACTION}/_action/cancel_goal"))
                         for r in self.cell.inst.robots}
         self.goal_of: dict[int, str] = {}  # goal key -> robot
+        self.uuid_of: dict[int, UUID] = {}  # goal key -> its goal id
+        self.last_goal: dict[str, int] = {}  # robot -> the key of its latest goal
         self.heard: dict[int, float] = {}  # goal key -> when its robot last answered (wall, steady)
         self.counts = {"goals": 0, "failures": 0, "refused": 0}
         self.finished = False
@@ -197,10 +213,12 @@ class DispatcherNode(Node):
         goal = ExecuteTask.Goal(task_id=spec.task, subteam=list(spec.subteam), site=spec.site, site_to=spec.site_to,
                                 require_names=list(spec.require_names), requires=list(spec.requires),
                                 planned_start=spec.planned_start, planned_duration=spec.planned_duration)
-        self.goal_of[spec.key] = spec.robot
+        self.goal_of[spec.key], self.last_goal[spec.robot] = spec.robot, spec.key
+        self.uuid_of[spec.key] = UUID(uuid=list(uuid.uuid4().bytes))
         self.heard[spec.key] = time.monotonic()
         self.counts["goals"] += 1
-        future = server.client.send_goal_async(goal, feedback_callback=partial(self.on_feedback, spec.key))
+        future = server.client.send_goal_async(goal, feedback_callback=partial(self.on_feedback, spec.key),
+                                               goal_uuid=self.uuid_of[spec.key])
         future.add_done_callback(partial(self.on_goal_response, spec.key))
 
     def on_goal_response(self, key: int, future: Any) -> None:
@@ -257,6 +275,9 @@ class DispatcherNode(Node):
         out = self.cell.silent(now, self.robot_timeout, available, {k: wall - t for k, t in self.heard.items()})
         for rid in set(self.cell.failed_robots()) - before:
             self.left(rid)
+        for rid, (why, _) in self.cell.failed_robots().items():
+            if why == "lost":
+                self.ask(rid, wall)
         for rid in self.back(now):
             out.add(self.cell.rejoin(rid))
         self.apply(out)
@@ -269,8 +290,30 @@ class DispatcherNode(Node):
     def left(self, robot: str) -> None:
         """Remember the server a robot left the team with (a restart brings a new one)."""
         server = self.servers[robot]
-        server.seen_down = False
+        server.seen_down, server.answered = False, False
         server.dead = self.endpoints(server)
+        if server.asking is not None:
+            server.probe.remove_pending_request(server.asking)
+            server.asking = None
+
+    def ask(self, robot: str, wall: float) -> None:
+        """Ask the server of a robot that went silent to cancel its lost goal (any answer,
+        even "unknown goal", shows it alive); again every ``robot_timeout`` seconds while
+        none comes, since a request can be lost like the goal was."""
+        server = self.servers[robot]
+        if server.answered or server.up_since is None or wall - server.asked < self.robot_timeout:
+            return
+        if server.asking is not None:
+            server.probe.remove_pending_request(server.asking)
+        key = self.last_goal.get(robot)
+        goal_id = self.uuid_of[key] if key is not None else UUID(uuid=list(uuid.uuid4().bytes))
+        server.asked = wall
+        server.asking = server.probe.call_async(CancelGoal.Request(goal_info=GoalInfo(goal_id=goal_id)))
+        server.asking.add_done_callback(partial(self.on_answer, server))
+
+    def on_answer(self, server: _Server, future: Future) -> None:
+        if future is server.asking and future.done() and future.result() is not None:
+            server.answered, server.asking = True, None
 
     def back(self, now: float) -> list[str]:
         """Robots out of the team whose server answers again (the module doc's rules)."""
@@ -280,7 +323,8 @@ class DispatcherNode(Node):
             if why == "fault" or server.up_since is None:
                 continue
             if why == "down" or (why in ("rejected", "aborted") and now - since >= self.rejoin_after) or \
-                    (why in ("lost", "canceled") and (server.seen_down or self.endpoints(server) - server.dead)):
+                    (why in ("lost", "canceled") and (server.seen_down or server.answered
+                                                      or self.endpoints(server) - server.dead)):
                 out.append(rid)
         return out
 

@@ -85,6 +85,8 @@ def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]
     join_domain(domain_id)
     import rclpy
 
+    from lvws_ros.ros.service_call import call, ready
+
     rclpy.init(args=["lvws_world_client"])
     try:
         node = rclpy.create_node("lvws_world_client", namespace=namespace or None)
@@ -92,16 +94,17 @@ def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]
                                      submit_type=_served_type(node, SERVICES[kind], timeout) if kind == "submit" else "")
         client = node.create_client(srv, SERVICES[kind])
         name = client.srv_name
-        if not client.wait_for_service(timeout_sec=timeout):
+        if not ready(client, timeout):
             raise LvwsError(f"no simulator answers on {name} within {timeout:g} s "
                             f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}; is the cell running there?)")
-        future = client.call_async(request)
-        end = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < end:
-            rclpy.spin_once(node, timeout_sec=0.05)
-        if not future.done():
+
+        def wait(future: Any, seconds: float) -> bool:
+            rclpy.spin_until_future_complete(node, future, timeout_sec=seconds)
+            return bool(future.done())
+
+        res = call(client, request, wait, timeout)  # sent once: a change is not repeated
+        if res is None:
             raise LvwsError(f"{name}: no answer within {timeout:g} s")
-        res = future.result()
         return bool(res.success), str(res.message)
     finally:
         rclpy.try_shutdown()

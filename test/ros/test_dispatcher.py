@@ -26,6 +26,7 @@ import rclpy
 from lvws_msgs.msg import Assignment, AssignmentArray, GoalEvent, Task, TaskGraph
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from lvws_ros.ros.service_call import call, ready
 from lvws_ros.ros.topics import (
     ASSIGNMENTS_QOS,
     ASSIGNMENTS_TOPIC,
@@ -95,6 +96,18 @@ class Cell:
         return _start([sys.executable, "-m", "lvws_ros.cli", "fake-robots", str(self.path), "--robots", robots,
                        "--rate", str(RATE), *extra])
 
+    def stop(self) -> None:
+        """SIGINT to every process still running, then wait for each (killed after 15 s)."""
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        for proc in self.procs.values():
+            try:
+                proc.communicate(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.communicate()
+
     def output(self, name: str) -> str:
         proc = self.procs[name]
         if proc.poll() is None:
@@ -144,15 +157,7 @@ def cell(ros_context: Any, tmp_path: Path, name: str, robots: dict[str, Sequence
             c.procs[pname] = c.robots(*args, *(["--use-sim-time"] if sim_time else []))
         yield c
     finally:
-        for proc in c.procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        for proc in c.procs.values():
-            try:
-                proc.communicate(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.communicate()
+        c.stop()
         node.destroy_node()
 
 
@@ -226,6 +231,59 @@ def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_us
     assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
 
 
+def test_a_silent_robot_whose_server_answers_a_cancel_request_is_back_even_if_its_lost_goal_never_ends(
+        ros_context, tmp_path):
+    # the robot's server lives here: it takes its goal and then says nothing, and refuses to cancel it (as a
+    # robot whose answers are lost on the way): it is lost, and back once its server answers the dispatcher
+    from lvws_msgs.action import ExecuteTask
+    from rclpy.action import ActionServer, CancelResponse, GoalResponse
+    from rclpy.task import Future
+
+    data = {"format": "lvws-instance/1", "name": "one", "capabilities": ["lift"],
+            "robots": [{"id": "r1", "capabilities": [1], "payload": 1}],
+            "tasks": [{"id": "t1", "capabilities": [1], "payload": 0, "duration": 1, "after": []}]}
+    path = tmp_path / "cell.json"
+    path.write_text(json.dumps(data))
+    node = rclpy.create_node("lvws_dispatch_mute", context=ros_context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    c = Cell(path, node, executor)
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(GoalEvent, GOAL_EVENTS_TOPIC, c.events.append, reliable)
+    node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS_TOPIC,
+                             lambda m: c.diags.extend(s.message for s in m.status), reliable)
+    cancels: list[int] = []
+
+    async def execute(handle: Any) -> Any:
+        await Future()  # never done: no feedback, no result
+        return ExecuteTask.Result()
+
+    def refuse(handle: Any) -> CancelResponse:
+        cancels.append(1)
+        return CancelResponse.REJECT
+
+    server = ActionServer(node, ExecuteTask, "r1/execute_task", execute_callback=execute,
+                          goal_callback=lambda goal: GoalResponse.ACCEPT, cancel_callback=refuse)
+    pub = node.create_publisher(AssignmentArray, ASSIGNMENTS_TOPIC, ASSIGNMENTS_QOS)
+    try:
+        c.procs["dispatcher"] = _start([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path), "--ros-args",
+                                        "-p", f"robot_timeout:={TIMEOUT}"])
+        assert c.spin(30, lambda: any("r1 is back in the team (was down)" in d for d in c.diags)), c.diags
+        assert c.spin(10, lambda: pub.get_subscription_count() >= 1)
+        pub.publish(AssignmentArray(decision_step=0, assignments=[Assignment(task_id="t1", robot_ids=["r1"])]))
+        assert c.spin(30, lambda: bool(c.of(GoalEvent.KIND_LOST, "r1"))), c.diags
+        assert c.spin(30, lambda: any("r1 is back in the team (was lost)" in d for d in c.diags)), \
+            c.output("dispatcher")
+        assert cancels  # its lost goal was asked to stop, and it refused
+        assert not c.of(GoalEvent.KIND_SUCCEEDED) and not c.of(GoalEvent.KIND_CANCELED)  # the goal never ended
+        pub.publish(AssignmentArray(decision_step=1, assignments=[Assignment(task_id="t1", robot_ids=["r1"])]))
+        assert c.spin(30, lambda: len(c.of(GoalEvent.KIND_SENT, "r1")) == 2), c.output("dispatcher")  # used again
+    finally:
+        c.stop()
+        server.destroy()
+        node.destroy_node()
+
+
 def test_on_sim_time_the_cell_runs_on_the_simulated_clock(ros_context, tmp_path):
     # a robot's first answer on a simulated clock can take over 1.5 wall seconds on a loaded machine:
     # this test is about the clock, not about losing robots
@@ -259,9 +317,9 @@ def test_cancel_task_cancels_every_members_goal_and_bad_assignments_are_named_no
                                 text=True, timeout=60)
         assert submit.returncode == 0 and "t9 added" in submit.stdout, submit.stdout + submit.stderr
         client = c.node.create_client(CancelTask, "cancel_task")
-        assert client.wait_for_service(timeout_sec=10)
-        future = client.call_async(CancelTask.Request(task_id="t1"))
-        assert c.spin(10, future.done) and future.result().success, future.result()
+        assert ready(client, 10.0)
+        answer = call(client, CancelTask.Request(task_id="t1"), lambda f, s: c.spin(s, f.done), 10.0)
+        assert answer is not None and answer.success, answer
         assert c.spin(10, lambda: {e.robot_id for e in c.of(GoalEvent.KIND_CANCELED) if e.task_id == "t1"}
                       == members)
         assert c.spin(60, c.done), c.output("dispatcher")

@@ -14,6 +14,7 @@ from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from lvws_msgs.msg import RobotState, Task, TaskGraph, TeamState
 
+from lvws_ros.ros.service_call import call, ready
 from scheduler_probe import scheduler_probe
 
 pytestmark = pytest.mark.ros
@@ -34,12 +35,15 @@ def snapshots(stamp: int, tasks: int) -> tuple[TeamState, TaskGraph]:
     return team, graph
 
 
-def _call(probe: Any, client: Any, request: Any) -> Any:
-    assert client.wait_for_service(timeout_sec=30.0)
-    future = client.call_async(request)
-    probe.spin(30, future.done)
-    assert future.done()
-    return future.result()
+def _call(probe: Any, client: Any, request: Any, resend: float = 0.0) -> Any:
+    """The answer (the client is :func:`ready`); a query is sent again while unanswered."""
+    def wait(future: Any, seconds: float) -> bool:
+        probe.spin(seconds, future.done)
+        return bool(future.done())
+
+    res = call(client, request, wait, 30.0, resend)
+    assert res is not None, f"no answer on {client.srv_name}"
+    return res
 
 
 def test_a_managed_scheduler_follows_its_lifecycle(ros_context):
@@ -48,12 +52,13 @@ def test_a_managed_scheduler_follows_its_lifecycle(ros_context):
         get = probe.node.create_client(GetState, "scheduler/get_state")
 
         def state() -> int:
-            return int(_call(probe, get, GetState.Request()).current_state.id)
+            return int(_call(probe, get, GetState.Request(), resend=3.0).current_state.id)
 
         def transition(tid: int) -> bool:
             return bool(_call(probe, change, ChangeState.Request(transition=Transition(id=tid))).success)
 
         probe.wait_for_scheduler()
+        assert ready(change, 30.0) and ready(get, 30.0)
         assert state() == State.PRIMARY_STATE_UNCONFIGURED
         team, graph = snapshots(10, 2)
         probe.team_pub.publish(team)
@@ -98,7 +103,8 @@ def test_an_unmanaged_scheduler_is_active_from_the_start(ros_context):
     with scheduler_probe(ros_context, "lvws_unmanaged_test", ["-p", "policy:=grp"]) as probe:
         get = probe.node.create_client(GetState, "scheduler/get_state")
         probe.wait_for_scheduler()
-        assert int(_call(probe, get, GetState.Request()).current_state.id) == State.PRIMARY_STATE_ACTIVE
+        assert ready(get, 30.0)
+        assert int(_call(probe, get, GetState.Request(), resend=3.0).current_state.id) == State.PRIMARY_STATE_ACTIVE
         team, graph = snapshots(10, 2)
         probe.team_pub.publish(team)
         probe.graph_pub.publish(graph)

@@ -6,6 +6,8 @@ then the parameter file, then its own defaults."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 from lvws_msgs.msg import RobotState, Task, TaskGraph, TeamState
 from rclpy.parameter import Parameter
@@ -13,6 +15,7 @@ from rclpy.parameter_client import AsyncParameterClient
 
 from lvws_ros.ros.launcher import _commands
 from lvws_ros.ros.scheduler_node import PARAMETERS
+from lvws_ros.ros.service_call import SETTLE
 from scheduler_probe import Probe, scheduler_probe
 
 pytestmark = pytest.mark.ros
@@ -54,6 +57,7 @@ def test_parameters_under_a_namespace_switch_at_runtime_and_refuse_with_a_reason
         assert probe.team_pub.topic_name == "/cellA/lvws/team_state"
         client = AsyncParameterClient(probe.node, "/cellA/scheduler")
         assert client.wait_for_services(timeout_sec=30)
+        time.sleep(SETTLE)  # the server's side matches the client too: its answers are not dropped
         described = call(probe, client.describe_parameters(list(PARAMETERS))).descriptors
         by_name = {d.name: d for d in described}
         assert all(by_name[n].description for n in PARAMETERS)
