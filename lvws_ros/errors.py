@@ -23,6 +23,7 @@ __all__ = [
     "ScheduleError",
     "WorldEventRejected",
     "WorldStuck",
+    "dropped_answer",
 ]
 
 
@@ -76,3 +77,12 @@ class BagError(LvwsError):
 
 class LaunchError(LvwsError):
     """A launched child process failed or the run did not finish."""
+
+
+def dropped_answer(exc: BaseException) -> bool:
+    """Whether ``exc`` (rclpy's ``RCLError``) is a service answer the middleware would not
+    send. Fast DDS refuses one when the client's reader of answers has not matched the
+    server 100 ms after the request came ("client will not receive response"); rclpy then
+    raises out of the executor, where rclcpp logs a warning and goes on. A node of ours
+    goes on too: the client asks again, or says it got no answer."""
+    return "failed to send response" in str(exc)

@@ -47,7 +47,7 @@ from rclpy.validate_namespace import validate_namespace
 from rclpy.validate_node_name import validate_node_name
 from rclpy.validate_topic_name import validate_topic_name
 
-from lvws_ros.errors import ConfigError, LvwsError
+from lvws_ros.errors import ConfigError, LvwsError, dropped_answer
 
 __all__ = [
     "ACTION_NAME",
@@ -284,6 +284,17 @@ def _result(out: Any, feedback: TaskFeedback, success: bool, message: str) -> An
     return result
 
 
+def _spin_once(executor: MultiThreadedExecutor, node: Node) -> None:
+    """One turn; a service answer the middleware would not send is logged, not fatal (as
+    in rclcpp): rclpy's action server already goes on after one of its own."""
+    try:
+        executor.spin_once(timeout_sec=SHUTDOWN_CHECK)
+    except RCLError as exc:
+        if not dropped_answer(exc) or not node.context.ok():
+            raise
+        node.get_logger().warning(f"a service answer was not sent ({exc}); the client may ask again")
+
+
 def serve(servers: Sequence[Node], threads: int | None = None) -> int:
     """Spin ``servers`` (task servers, and any other nodes) on one multi-threaded executor
     until Ctrl-C, SIGTERM or shutdown; destroy them and shut rclpy down. Two threads per
@@ -296,7 +307,7 @@ def serve(servers: Sequence[Node], threads: int | None = None) -> int:
         executor.add_node(node)
     try:
         while context.ok():  # not executor.spin(): a shutdown whose wake-up came while the executor was
-            executor.spin_once(timeout_sec=SHUTDOWN_CHECK)  # between waits would leave it waiting for the next event
+            _spin_once(executor, servers[0])  # between waits would leave it waiting for the next event
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RCLError:

@@ -40,7 +40,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.errors import AssignmentRejected, ConfigError, LvwsError, WorldEventRejected
 from lvws_ros.ros import convert, topics
-from lvws_ros.ros.entry import node_main
+from lvws_ros.ros.entry import node_main, spin_once
 from lvws_ros.ros.resources import case_study_config
 from lvws_ros.sim.config import ARM_KINDS, load_cell_config
 from lvws_ros.sim.events import WorldEvent, apply_event, load_events, stuck_reason
@@ -353,12 +353,12 @@ class CellSimNode(Node):
 def run(node: CellSimNode) -> int:
     """Spin until the world is done, then a moment more so the recorder takes the final state."""
     while rclpy.ok() and not node.finished:
-        rclpy.spin_once(node, timeout_sec=0.1)
+        spin_once(node, 0.1)
     if not node.finished:
         return 1
     end = time.monotonic() + 0.5
     while rclpy.ok() and time.monotonic() < end:
-        rclpy.spin_once(node, timeout_sec=0.05)
+        spin_once(node, 0.05)
     return node.exit_code
 
 

@@ -326,6 +326,7 @@ class LiveFeed:
                               topics.ASSIGNMENTS_QOS)
         n.create_subscription(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, diagnostics, topics.DIAGNOSTICS_QOS)
         self.executor = SingleThreadedExecutor()
+        self.closing = False
         self.executor.add_node(n)
         self.thread = threading.Thread(target=self._spin, name="dashboard-ros", daemon=True)
         self.thread.start()
@@ -333,15 +334,19 @@ class LiveFeed:
     def _spin(self) -> None:
         from rclpy.executors import ExternalShutdownException
 
+        from lvws_ros.ros.entry import SHUTDOWN_CHECK, spin_once
+
         try:
-            self.executor.spin()
+            while self.node.context.ok() and not self.closing:
+                spin_once(self.node, SHUTDOWN_CHECK, self.executor)
         except ExternalShutdownException:
             pass
 
     def call(self, kind: str, *, tasks: list[dict[str, Any]] | None = None, target: str = "",
              failed: bool = True, timeout: float = 10.0) -> tuple[bool, str]:
         """One of the simulator's services; (accepted, its message)."""
-        from lvws_ros.ros.service_call import call, ready
+        from lvws_ros.ros.service_call import call as call_service
+        from lvws_ros.ros.service_call import ready
         from lvws_ros.ros.world_client import SERVICES, world_request
 
         srv, request = world_request(kind, tasks=tasks or [], target=target, failed=failed)
@@ -355,7 +360,7 @@ class LiveFeed:
                 future.add_done_callback(lambda _f: done.set())
                 return done.wait(seconds)
 
-            res = call(client, request, wait, timeout)  # sent once: a change is not repeated
+            res = call_service(client, request, wait, timeout)  # sent once: a change is not repeated
             if res is None:
                 return False, f"{client.srv_name}: no answer within {timeout:g} s"
             return bool(res.success), str(res.message)
@@ -365,7 +370,9 @@ class LiveFeed:
     def close(self) -> None:
         import rclpy
 
+        self.closing = True
         self.executor.shutdown()
+        self.thread.join(timeout=2 * 0.5)
         self.node.destroy_node()
         rclpy.try_shutdown()
 

@@ -17,10 +17,12 @@ again and the robot leaves TeamState. It comes back when its server answers agai
 ``rejoin_after`` seconds for a robot that rejected or aborted; for one that went silent,
 once a new server is up under its name (a restarted robot), its server was seen gone
 and is back, it ends its lost goal after all, or its server answers a request to cancel
-the lost goal. That request goes to the action's ``cancel_goal`` service every
-``robot_timeout`` seconds until one is answered: a robot whose goal, or whose answers,
-were lost on the way (DDS drops what is sent before both ends have matched) is alive,
-and a dead one never answers, even while its server's endpoints linger. Every
+the lost goal that the goal is unknown to it or already over (:func:`free_by_answer`).
+That request goes to the action's ``cancel_goal`` service every ``robot_timeout``
+seconds while the robot is out: a goal, or its answers, can be lost on the way (DDS drops
+what is sent before both ends have matched, and rclpy's action server then forgets the
+goal), a robot still at work on its goal stays out until the goal is over, and a dead
+robot never answers, even while its server's endpoints linger. Every
 goal's events go to ``lvws/goal_events`` (lvws_msgs/GoalEvent); what the dispatcher
 refuses (an assignment naming an unknown robot or task, a busy robot) or ignores (a
 result or feedback of a goal already over) is logged and reported on ``diagnostics``
@@ -63,15 +65,29 @@ from lvws_ros.core.dispatch import Dispatch, GoalKind, GoalSpec, Outcome
 from lvws_ros.core.formats import load_instance
 from lvws_ros.errors import ConfigError, DispatchRefused, LvwsError
 from lvws_ros.ros import convert, topics
-from lvws_ros.ros.entry import node_main
+from lvws_ros.ros.entry import node_main, spin_once
 
-__all__ = ["DispatcherNode", "main"]
+__all__ = ["DispatcherNode", "free_by_answer", "main"]
 
 ACTION = "execute_task"  # each robot's server: <robot id>/execute_task
 WATCH_SECONDS = 0.25  # how often the robots' servers and silences are looked at
 PROGRESS_SECONDS = 2.0
 WAIT_FOR_SUBSCRIBERS = 20.0  # wall seconds the first state waits for expect_subscribers
 _ENDS = {GoalStatus.STATUS_ABORTED: GoalKind.ABORTED, GoalStatus.STATUS_CANCELED: GoalKind.CANCELED}
+PROBES_KEPT = 4  # a silent robot's probes awaiting an answer (older ones are forgotten)
+
+
+def _new_uuid() -> UUID:
+    return UUID(uuid=list(uuid.uuid4().bytes))
+
+
+def free_by_answer(res: Any) -> bool:
+    """Whether a server's answer to the cancel request of a lost goal
+    (``action_msgs/srv/CancelGoal`` response) shows the robot alive and free: the goal is
+    unknown to it (it never came, or was forgotten) or over (its result was lost). A goal
+    it is cancelling or refuses to cancel is still running: its result will say when."""
+    return int(res.return_code) in (CancelGoal.Response.ERROR_UNKNOWN_GOAL_ID,
+                                    CancelGoal.Response.ERROR_GOAL_TERMINATED)
 
 
 def _param(node: Node, name: str, default: Any, text: str, low: float | None = None, read_only: bool = True) -> Any:
@@ -93,9 +109,10 @@ class _Server:
     seen_down: bool = False  # since the robot left the team
     dead: frozenset[bytes] = frozenset()  # its server's endpoints when it went silent
     handles: dict[int, Any] = field(default_factory=dict)  # goal key -> ClientGoalHandle
-    asking: Future | None = None  # the probe in flight
-    asked: float = -1e18  # wall (steady) seconds it was sent
-    answered: bool = False  # the server answered a probe since the robot left the team
+    asking: list[Future] = field(default_factory=list)  # the latest probes in flight
+    asked: float = -1e18  # wall (steady) seconds the last one was sent
+    answered: bool = False  # the server said, since the robot left the team, that it is free
+    epoch: int = 0  # how many times the robot left the team: a probe of an earlier time is void
 
 
 class DispatcherNode(Node):
@@ -131,8 +148,7 @@ class DispatcherNode(Node):
                                       self.create_client(CancelGoal, f"{r.id}/{ACTION}/_action/cancel_goal"))
                         for r in self.cell.inst.robots}
         self.goal_of: dict[int, str] = {}  # goal key -> robot
-        self.uuid_of: dict[int, UUID] = {}  # goal key -> its goal id
-        self.last_goal: dict[str, int] = {}  # robot -> the key of its latest goal
+        self.last_uuid: dict[str, UUID] = {}  # robot -> the goal id of its latest goal
         self.heard: dict[int, float] = {}  # goal key -> when its robot last answered (wall, steady)
         self.counts = {"goals": 0, "failures": 0, "refused": 0}
         self.finished = False
@@ -213,12 +229,12 @@ class DispatcherNode(Node):
         goal = ExecuteTask.Goal(task_id=spec.task, subteam=list(spec.subteam), site=spec.site, site_to=spec.site_to,
                                 require_names=list(spec.require_names), requires=list(spec.requires),
                                 planned_start=spec.planned_start, planned_duration=spec.planned_duration)
-        self.goal_of[spec.key], self.last_goal[spec.robot] = spec.robot, spec.key
-        self.uuid_of[spec.key] = UUID(uuid=list(uuid.uuid4().bytes))
+        self.goal_of[spec.key] = spec.robot
+        self.last_uuid[spec.robot] = _new_uuid()
         self.heard[spec.key] = time.monotonic()
         self.counts["goals"] += 1
         future = server.client.send_goal_async(goal, feedback_callback=partial(self.on_feedback, spec.key),
-                                               goal_uuid=self.uuid_of[spec.key])
+                                               goal_uuid=self.last_uuid[spec.robot])
         future.add_done_callback(partial(self.on_goal_response, spec.key))
 
     def on_goal_response(self, key: int, future: Any) -> None:
@@ -290,30 +306,31 @@ class DispatcherNode(Node):
     def left(self, robot: str) -> None:
         """Remember the server a robot left the team with (a restart brings a new one)."""
         server = self.servers[robot]
-        server.seen_down, server.answered = False, False
+        server.seen_down, server.answered, server.asked = False, False, -1e18
         server.dead = self.endpoints(server)
-        if server.asking is not None:
-            server.probe.remove_pending_request(server.asking)
-            server.asking = None
+        server.epoch += 1
+        for future in server.asking:
+            server.probe.remove_pending_request(future)
+        server.asking.clear()
 
     def ask(self, robot: str, wall: float) -> None:
-        """Ask the server of a robot that went silent to cancel its lost goal (any answer,
-        even "unknown goal", shows it alive); again every ``robot_timeout`` seconds while
-        none comes, since a request can be lost like the goal was."""
+        """Ask the server of a robot that went silent to cancel its lost goal; again every
+        ``robot_timeout`` seconds until it says the goal is unknown or over (a request can
+        be lost like the goal was, and a slow answer still counts)."""
         server = self.servers[robot]
         if server.answered or server.up_since is None or wall - server.asked < self.robot_timeout:
             return
-        if server.asking is not None:
-            server.probe.remove_pending_request(server.asking)
-        key = self.last_goal.get(robot)
-        goal_id = self.uuid_of[key] if key is not None else UUID(uuid=list(uuid.uuid4().bytes))
+        while len(server.asking) >= PROBES_KEPT:
+            server.probe.remove_pending_request(server.asking.pop(0))
+        goal_id = self.last_uuid.get(robot) or _new_uuid()
         server.asked = wall
-        server.asking = server.probe.call_async(CancelGoal.Request(goal_info=GoalInfo(goal_id=goal_id)))
-        server.asking.add_done_callback(partial(self.on_answer, server))
+        future = server.probe.call_async(CancelGoal.Request(goal_info=GoalInfo(goal_id=goal_id)))
+        future.add_done_callback(partial(self.on_answer, server, server.epoch))
+        server.asking.append(future)
 
-    def on_answer(self, server: _Server, future: Future) -> None:
-        if future is server.asking and future.done() and future.result() is not None:
-            server.answered, server.asking = True, None
+    def on_answer(self, server: _Server, epoch: int, future: Future) -> None:
+        if epoch == server.epoch and future.result() is not None and free_by_answer(future.result()):
+            server.answered = True
 
     def back(self, now: float) -> list[str]:
         """Robots out of the team whose server answers again (the module doc's rules)."""
@@ -389,10 +406,10 @@ def run(node: DispatcherNode) -> int:
     """Spin until the cell is done (with ``exit_when_done``), then a moment more so the
     recorder takes the final state."""
     while rclpy.ok() and not node.finished:
-        rclpy.spin_once(node, timeout_sec=0.1)
+        spin_once(node, 0.1)
     end = time.monotonic() + 0.5
     while rclpy.ok() and time.monotonic() < end:
-        rclpy.spin_once(node, timeout_sec=0.05)
+        spin_once(node, 0.05)
     return node.exit_code
 
 

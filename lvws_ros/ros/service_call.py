@@ -46,7 +46,7 @@ def call(client: Client, request: Any, wait: Wait, timeout: float, resend: float
     while True:
         future = client.call_async(request)
         left = end - time.monotonic()
-        if wait(future, min(left, resend) if resend > 0 else left):
+        if wait(future, max(0.0, min(left, resend) if resend > 0 else left)):
             return future.result()
         client.remove_pending_request(future)
         if time.monotonic() >= end:

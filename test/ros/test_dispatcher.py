@@ -231,12 +231,26 @@ def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_us
     assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
 
 
-def test_a_silent_robot_whose_server_answers_a_cancel_request_is_back_even_if_its_lost_goal_never_ends(
+def test_a_cancel_answer_frees_a_lost_robot_only_when_its_goal_is_unknown_or_over():
+    from action_msgs.srv import CancelGoal
+
+    from lvws_ros.ros.dispatcher_node import free_by_answer
+
+    R = CancelGoal.Response
+    assert free_by_answer(R(return_code=R.ERROR_UNKNOWN_GOAL_ID))  # never came, or forgotten
+    assert free_by_answer(R(return_code=R.ERROR_GOAL_TERMINATED))  # over, its result lost
+    assert not free_by_answer(R(return_code=R.ERROR_NONE))  # being cancelled: its result will come
+    assert not free_by_answer(R(return_code=R.ERROR_REJECTED))  # still at work
+
+
+def test_a_robot_whose_goal_was_lost_on_the_way_is_back_once_its_server_says_so_a_busy_one_once_done(
         ros_context, tmp_path):
-    # the robot's server lives here: it takes its goal and then says nothing, and refuses to cancel it (as a
-    # robot whose answers are lost on the way): it is lost, and back once its server answers the dispatcher
+    # the robot's server lives here. Its first goal is forgotten unanswered, as rclpy's action server forgets
+    # a goal whose answer DDS would not send: the robot is lost, alive and free, and back once its server
+    # answers the dispatcher's cancel request that the goal is unknown. Its second goal it takes and works on
+    # in silence, refusing to stop: it is lost and stays out until that goal is over. Its third it does.
     from lvws_msgs.action import ExecuteTask
-    from rclpy.action import ActionServer, CancelResponse, GoalResponse
+    from rclpy.action import ActionServer, CancelResponse
     from rclpy.task import Future
 
     data = {"format": "lvws-instance/1", "name": "one", "capabilities": ["lift"],
@@ -244,7 +258,7 @@ def test_a_silent_robot_whose_server_answers_a_cancel_request_is_back_even_if_it
             "tasks": [{"id": "t1", "capabilities": [1], "payload": 0, "duration": 1, "after": []}]}
     path = tmp_path / "cell.json"
     path.write_text(json.dumps(data))
-    node = rclpy.create_node("lvws_dispatch_mute", context=ros_context)
+    node = rclpy.create_node("lvws_dispatch_forget", context=ros_context)
     executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
     c = Cell(path, node, executor)
@@ -252,32 +266,53 @@ def test_a_silent_robot_whose_server_answers_a_cancel_request_is_back_even_if_it
     node.create_subscription(GoalEvent, GOAL_EVENTS_TOPIC, c.events.append, reliable)
     node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS_TOPIC,
                              lambda m: c.diags.extend(s.message for s in m.status), reliable)
-    cancels: list[int] = []
+    forgotten, worked, cancels, release = [], [], [], Future()
+
+    class Forgetful(ActionServer):
+        async def _execute_goal_request(self, request_header_and_message: Any) -> None:
+            if not forgotten:
+                forgotten.append(1)
+                return  # no answer, no goal
+            await super()._execute_goal_request(request_header_and_message)
 
     async def execute(handle: Any) -> Any:
-        await Future()  # never done: no feedback, no result
-        return ExecuteTask.Result()
+        worked.append(1)
+        if len(worked) == 1:
+            await release  # at work, in silence
+        handle.succeed()
+        return ExecuteTask.Result(success=True, duration=0.1)
 
     def refuse(handle: Any) -> CancelResponse:
         cancels.append(1)
         return CancelResponse.REJECT
 
-    server = ActionServer(node, ExecuteTask, "r1/execute_task", execute_callback=execute,
-                          goal_callback=lambda goal: GoalResponse.ACCEPT, cancel_callback=refuse)
+    def back() -> int:
+        return sum("r1 is back in the team (was lost)" in d for d in c.diags)
+
+    def assign(step: int) -> None:
+        pub.publish(AssignmentArray(decision_step=step, assignments=[Assignment(task_id="t1", robot_ids=["r1"])]))
+
+    server = Forgetful(node, ExecuteTask, "r1/execute_task", execute_callback=execute, cancel_callback=refuse)
     pub = node.create_publisher(AssignmentArray, ASSIGNMENTS_TOPIC, ASSIGNMENTS_QOS)
     try:
         c.procs["dispatcher"] = _start([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path), "--ros-args",
                                         "-p", f"robot_timeout:={TIMEOUT}"])
         assert c.spin(30, lambda: any("r1 is back in the team (was down)" in d for d in c.diags)), c.diags
         assert c.spin(10, lambda: pub.get_subscription_count() >= 1)
-        pub.publish(AssignmentArray(decision_step=0, assignments=[Assignment(task_id="t1", robot_ids=["r1"])]))
-        assert c.spin(30, lambda: bool(c.of(GoalEvent.KIND_LOST, "r1"))), c.diags
-        assert c.spin(30, lambda: any("r1 is back in the team (was lost)" in d for d in c.diags)), \
-            c.output("dispatcher")
-        assert cancels  # its lost goal was asked to stop, and it refused
-        assert not c.of(GoalEvent.KIND_SUCCEEDED) and not c.of(GoalEvent.KIND_CANCELED)  # the goal never ended
-        pub.publish(AssignmentArray(decision_step=1, assignments=[Assignment(task_id="t1", robot_ids=["r1"])]))
-        assert c.spin(30, lambda: len(c.of(GoalEvent.KIND_SENT, "r1")) == 2), c.output("dispatcher")  # used again
+        assign(0)
+        assert c.spin(30, lambda: len(c.of(GoalEvent.KIND_LOST, "r1")) == 1), c.diags
+        assert c.spin(30, lambda: back() == 1), c.output("dispatcher")
+        assert forgotten and not cancels  # the goal never reached the server's callbacks
+
+        assign(1)
+        assert c.spin(30, lambda: len(c.of(GoalEvent.KIND_LOST, "r1")) == 2), c.diags
+        c.spin(4 * TIMEOUT, lambda: back() > 1)
+        assert back() == 1 and len(cancels) >= 2  # asked again and again; still at work, it stays out
+        release.set_result(None)
+        assert c.spin(30, lambda: back() == 2), c.output("dispatcher")  # its goal is over
+
+        assign(2)
+        assert c.spin(30, lambda: bool(c.of(GoalEvent.KIND_SUCCEEDED, "r1"))), c.output("dispatcher")
     finally:
         c.stop()
         server.destroy()

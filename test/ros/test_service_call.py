@@ -1,6 +1,8 @@
-"""Service calls that bound their wait, over real DDS: a query unanswered in time is sent
-again and the answer that comes is taken; a change is sent once, and a server that never
-answers gives None at the timeout, not a hang."""
+"""Service calls that bound their wait, over real DDS: a query unanswered in time (here: a
+server that does not spin for its first seconds, standing for an answer dropped on the
+way) is sent again and the answer that comes is taken; a change is sent once, and a
+server that never answers gives None at the timeout, not a hang. And a node's spin goes
+on past an answer the middleware would not send, as rclcpp's does."""
 
 from __future__ import annotations
 
@@ -57,6 +59,8 @@ def test_a_query_unanswered_in_time_is_sent_again_and_the_answer_taken(ros_conte
         assert res is not None and res.current_state.label == "answered"
         assert len(taken) >= 2  # sent again while the first went unanswered
     finally:
+        cex.shutdown()
+        sex.shutdown()
         client_node.destroy_node()
         server_node.destroy_node()
 
@@ -87,5 +91,36 @@ def test_a_change_is_sent_once_and_a_silent_server_gives_none_at_the_timeout(ros
         res = call(client, GetState.Request(), wait, 30.0)
         assert res is not None and len(taken) == 2
     finally:
+        cex.shutdown()
+        sex.shutdown()
         client_node.destroy_node()
         server_node.destroy_node()
+
+
+def test_a_spin_goes_on_past_an_answer_the_middleware_would_not_send(ros_context):
+    from rclpy._rclpy_pybind11 import RCLError
+
+    from lvws_ros.ros.entry import spin_once
+
+    node = rclpy.create_node("lvws_spin_guard", context=ros_context)
+    ex = _executor(ros_context, node)
+    raised: list[str] = []
+
+    def fail() -> None:  # what rclpy's executor raises when Fast DDS refuses to send an answer
+        raised.append(raised[0] if raised else "failed to send response: client will not receive response")
+        raise RCLError(raised[-1])
+
+    timer = node.create_timer(0.01, fail)
+    try:
+        end = time.monotonic() + 5.0
+        while len(raised) < 3 and time.monotonic() < end:
+            spin_once(node, 0.1, ex)  # logged, not raised
+        assert len(raised) >= 3
+        raised[0] = "failed to publish: a real error"
+        with pytest.raises(RCLError, match="failed to publish"):
+            for _ in range(50):
+                spin_once(node, 0.1, ex)
+    finally:
+        node.destroy_timer(timer)
+        ex.shutdown()
+        node.destroy_node()
