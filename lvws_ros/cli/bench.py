@@ -333,8 +333,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-limit", type=float, default=60.0)
     parser.add_argument("--model", default=None, help="LVWS checkpoint for Fig. 5 (default: the shipped one)")
     parser.add_argument("--fig5-png", default="docs/fig5.png")
-    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale", "anytime", "mspsp"],
-                        default=None)
+    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale", "anytime", "mspsp",
+                                           "coalitions"], default=None)
     parser.add_argument("--anytime-png", default="docs/scale_anytime.png")
     parser.add_argument("--anytime-limit", type=float, default=60.0, help="seconds of planning per instance")
     parser.add_argument("--mspsp-dir", default=None,
@@ -343,6 +343,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--mspsp-count", type=int, default=None, help="only the first COUNT files")
     parser.add_argument("--mspsp-results", default=None, help="the library's results folder (their optima)")
     parser.add_argument("--scale-limit", type=float, default=600.0, help="wall seconds per whole-schedule run")
+    parser.add_argument("--coalitions", default="dcmrta:0:50,heteromrta:0:50",
+                        help="the public coalition benchmarks' instances (NAME:FIRST:COUNT, comma-separated; "
+                             "--only coalitions)")
+    parser.add_argument("--coalitions-limit", type=float, default=20.0, help="auto's planning seconds per instance")
     args = parser.parse_args(argv)
     print(f"# lvws_ros benchmarks — {machine()}")
     if args.only in (None, "core"):
@@ -364,6 +368,12 @@ def main(argv: list[str] | None = None) -> int:
         bench_runtime()
     if args.only in (None, "dynamic"):
         bench_dynamic()
+    if args.only in (None, "coalitions"):
+        from lvws_ros.cli.bench_coalitions import bench_coalitions
+
+        for item in args.coalitions.split(","):
+            name, first, count = item.split(":")
+            bench_coalitions(name, int(first), int(count), args.coalitions_limit, args.seed)
     if args.only == "mspsp" or (args.only is None and args.mspsp_dir):
         if not args.mspsp_dir:
             parser.error("--only mspsp needs --mspsp-dir")

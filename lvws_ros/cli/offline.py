@@ -147,6 +147,30 @@ def _import_dcmrta(folder: Path, name: str | None) -> Instance:
                            name or folder.name, str(folder))
 
 
+def _import_ctas_plan(path: Path, inst: Instance, out: str) -> None:
+    """The CTAS-D MILP's plan of ``path`` (its routes: :func:`~lvws_ros.core.importers.ctas_plan`)
+    carried out by the executor from the start, written to ``out`` as a schedule."""
+    import yaml
+
+    from lvws_ros.core.executor import State
+    from lvws_ros.core.formats import save_schedule
+    from lvws_ros.core.importers import ctas_plan
+    from lvws_ros.planning.follow import repair
+
+    try:
+        results = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InstanceError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    except yaml.YAMLError as exc:
+        raise InstanceError(f"{path}: not YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(results, dict):
+        raise InstanceError(f"{path}: expected a mapping at the top")
+    executed = repair(State.initial(inst), ctas_plan(results, inst, str(path))).schedule
+    executed.policy = "ctas-d"
+    save_schedule(executed, out)
+    print(f"{out}: the plan of {path}, makespan {executed.makespan:g}", file=sys.stderr)
+
+
 def cmd_import(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -157,10 +181,14 @@ def cmd_import(args: argparse.Namespace) -> int:
         usage = {"mspsp": "FILE.dzn", "psplib": "FILE.sm or FILE.rcp", "csv": "ROBOTS.csv TASKS.csv",
                  "dcmrta": "a folder with graph.yaml, task_param.yaml, vehicle_param.yaml, planner_param.yaml"}
         raise ConfigError(f"{args.kind} takes {wanted} file(s): {usage[args.kind]}, got {len(args.files)}")
+    if args.plan and args.kind != "dcmrta":
+        raise ConfigError("--plan is for dcmrta (a folder with the CTAS-D MILP's results.yaml)")
     if args.kind == "dcmrta":
         if args.sites or args.objective != "makespan":
             raise ConfigError("--sites and --objective are for csv")
         inst = _import_dcmrta(Path(args.files[0]), args.name)
+        if args.plan:
+            _import_ctas_plan(Path(args.files[0]) / "results.yaml", inst, args.plan)
     elif args.kind != "csv":
         if args.sites or args.objective != "makespan":
             raise ConfigError("--sites and --objective are for csv")
@@ -450,6 +478,8 @@ def add_parsers(add: Adder) -> None:
                    help="csv: the instance's objective")
     p.add_argument("--name", default=None, help="the instance's name (default: the file's)")
     p.add_argument("--out", required=True, help="the lvws-instance/1 file to write")
+    p.add_argument("--plan", default=None, help="dcmrta: also the folder's results.yaml (the CTAS-D MILP's plan), "
+                                                "carried out by the executor, to this lvws-schedule/1 file")
 
     p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")
     p.add_argument("instance")

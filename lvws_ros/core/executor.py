@@ -117,6 +117,16 @@ class State:
             return 0.0
         return tr.arrival(team, [int(self.robot_site[r]) for r in team], task)
 
+    def arrival_each(self, task: int, team: Sequence[int]) -> float:
+        """When the last member of ``team`` can be at ``task`` if each sets out as soon as
+        it is free (now, or when the tasks it was given end) from where it is then
+        (``"departure": "each"``; inf if a fixed member is elsewhere)."""
+        tr = self.instance.travel
+        leave = np.maximum(self.robot_free_at[list(team)], self.time)
+        if tr is None or self.robot_site is None:
+            return float(leave.max())
+        return max(float(t) + tr.arrival([r], [int(self.robot_site[r])], task) for r, t in zip(team, leave, strict=True))
+
     def arrivals(self, robots: npt.ArrayLike, tasks: npt.ArrayLike) -> FloatArray:
         """(len(robots), len(tasks)): seconds each robot needs to reach each task alone
         (zeros without travel; inf where it never can)."""
@@ -132,8 +142,13 @@ class State:
 
     def start(self, task: int, team: Sequence[int]) -> None:
         """The subteam is busy from now: it travels to the task (travel extension), which
-        starts when its slowest member is there."""
-        start = self.time + self.arrival(task, team)
+        starts when its slowest member is there. With ``"departure": "each"`` a member may
+        be busy still (given earlier tasks): it sets out from where those leave it once it
+        is free (:meth:`arrival_each`)."""
+        if self.instance.departure == "each":
+            start = self.arrival_each(task, team)
+        else:
+            start = self.time + self.arrival(task, team)
         self.task_status[task] = TaskStatus.ASSIGNED
         self.task_start[task] = start
         self.task_team[task] = tuple(sorted(team))
@@ -230,9 +245,12 @@ class SimulationResult:
 
 
 def check_decision(state: State, decision: Decision, policy: str = "policy") -> None:
-    """Raise PolicyError unless the decision obeys Eqs. 8-11 in this state."""
+    """Raise PolicyError unless the decision obeys Eqs. 8-11 in this state. With
+    ``"departure": "each"`` a task may also be given to busy robots, and a robot several
+    tasks of one step (in the decision's order: it does them one after the other)."""
     inst = state.instance
-    free = state.robot_available()
+    ahead = inst.departure == "each"
+    free = np.ones(inst.num_robots, dtype=bool) if ahead else state.robot_available()
     used: set[int] = set()
     seen_tasks: set[int] = set()
     for task, team in decision.assignments:
@@ -251,7 +269,7 @@ def check_decision(state: State, decision: Decision, policy: str = "policy") -> 
                 raise PolicyError(f"{policy}: unknown robot index {r}")
             if not free[r]:
                 raise PolicyError(f"{policy}: robot {inst.robots[r].id!r} is busy until {state.robot_free_at[r]:g}")
-            if r in used:
+            if r in used and not ahead:
                 raise PolicyError(f"{policy}: robot {inst.robots[r].id!r} given two tasks (Eq. 9)")
             used.add(r)
         idx = list(team)

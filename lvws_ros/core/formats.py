@@ -260,18 +260,19 @@ def instance_from_dict(data: Any) -> Instance:
              for n, t in enumerate(_list(_require(data, "tasks", "instance"), "tasks"))]
     objective = _string(data.get("objective", "makespan"), "objective")
     roles = _roles(data["roles"], "roles") if "roles" in data else False
+    departure = _string(data.get("departure", "together"), "departure")
     if "sites" not in data:  # no travel extension: zero travel, as in every file before it
         homes = [n for n, r in enumerate(robots) if "home" in r.extra]
         if homes:
             raise InstanceError(f"robots[{homes[0]}].home: a home site needs the instance's sites "
                                 f"(robot {robots[homes[0]].id[:40]!r})")
         return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks), traits=traits,
-                        objective=objective, roles=roles)
+                        objective=objective, roles=roles, departure=departure)
     travel = _travel(data, robots, tasks)
     robots = [replace(r, extra={k: v for k, v in r.extra.items() if k not in _ROBOT_TRAVEL_KEYS}) for r in robots]
     tasks = [replace(t, extra={k: v for k, v in t.extra.items() if k not in _TASK_TRAVEL_KEYS}) for t in tasks]
     return Instance(name=name, capabilities=caps, robots=tuple(robots), tasks=tuple(tasks), travel=travel,
-                    traits=traits, objective=objective, roles=roles)
+                    traits=traits, objective=objective, roles=roles, departure=departure)
 
 
 _ROBOT_TRAVEL_KEYS = {"site", "speed", "home"}
@@ -320,6 +321,8 @@ def instance_to_dict(inst: Instance) -> dict[str, Any]:
         out["objective"] = inst.objective
     if inst.roles:
         out["roles"] = True
+    if inst.departure != "together":
+        out["departure"] = inst.departure
     out["robots"] = [{**_needs(r.id, r.capabilities, r.payload, "traits", r.traits, traits_only), **r.extra}
                      for r in inst.robots]
     out["tasks"] = [{**_needs(t.id, t.capabilities, t.payload, "requires", t.requires, traits_only),

@@ -14,6 +14,7 @@ the standard library's.
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 import re
 from collections.abc import Callable
@@ -25,10 +26,11 @@ import numpy as np
 
 from lvws_ros.core.formats import instance_from_dict
 from lvws_ros.core.problem import Instance, Robot, Task
+from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.core.travel import build_travel
 from lvws_ros.errors import InstanceError
 
-__all__ = ["dcmrta_instance", "import_csv", "import_mspsp", "import_psplib", "parse_dzn"]
+__all__ = ["ctas_plan", "dcmrta_instance", "import_csv", "import_mspsp", "import_psplib", "parse_dzn"]
 
 # ---------------------------------------------------------------- DataZinc (MSPSP)
 
@@ -650,39 +652,74 @@ def _planar(dist: np.ndarray, where: str) -> np.ndarray:
     return centred
 
 
+def _depot_at(tasks_xy: np.ndarray, dist: np.ndarray, where: str) -> list[float]:
+    """The point whose straight-line distances to the tasks' points ``tasks_xy`` are the
+    depot row of ``dist`` (a vehicle type's graph, its depot last): trilateration, exact for
+    points of a plane; InstanceError when the type's graph places the tasks elsewhere."""
+    n = len(tasks_xy)
+    err = np.abs(np.linalg.norm(tasks_xy[:, None] - tasks_xy[None], axis=2) - dist[:n, :n]).max()
+    scale = max(1.0, float(dist.max()))
+    if err > 1e-6 * scale:
+        raise InstanceError(f"{where}: its distances among the tasks differ from the first vehicle type's "
+                            f"(off by {err:.3g})")
+    d = dist[n, :n]
+    # |p - x_j|^2 = d_j^2, less the same for task 0: linear in p
+    a = 2.0 * (tasks_xy[1:] - tasks_xy[0])
+    b = d[0] ** 2 - d[1:] ** 2 + (tasks_xy[1:] ** 2).sum(axis=1) - (tasks_xy[0] ** 2).sum()
+    p = np.linalg.lstsq(a, b, rcond=None)[0]
+    off = np.abs(np.linalg.norm(tasks_xy - p, axis=1) - d).max()
+    if off > 1e-6 * scale:
+        raise InstanceError(f"{where}: its depot's distances are not those of a point in the tasks' plane "
+                            f"(off by {off:.3g})")
+    return [float(p[0]), float(p[1])]
+
+
 def dcmrta_instance(graph: dict[str, Any], tasks: dict[str, Any], vehicles: dict[str, Any],
                     planner: dict[str, Any], name: str, where: str) -> Instance:
     """An instance in traits from the four YAML documents (already read) of one instance of
     the DCMRTA / CTAS-D test sets (``graph.yaml``, ``task_param.yaml``,
     ``vehicle_param.yaml``, ``planner_param.yaml``): ``vehNumPerType`` robots of each
-    vehicle type with its ``capVector`` as traits ``cap0``, ``cap1``, ..., all at the depot
-    and back there at the end (``"objective": "return"``); each task at its own site
-    (recovered from the distances: :func:`_planar`), its duration the graph's node weight,
-    its requirement the ``capReq`` of each ``and`` clause (one ``or`` alternative each). The
-    travel time is distance / speed as the graph's edges give it. ``where`` names the files
-    in errors."""
+    vehicle type with its ``capVector`` as traits ``cap0``, ``cap1``, ..., all at their
+    type's depot and back there at the end (``"objective": "return"``), each setting out for
+    its next task as soon as it is free (``"departure": "each"``: the benchmarks' robots
+    travel on their own and wait at a task for the rest of its coalition); each task at its own
+    site (recovered from the distances: :func:`_planar`), its duration the graph's node
+    weight, its requirement the ``capReq`` of each ``and`` clause (one ``or`` alternative
+    each). The travel time is distance / speed as the graph's edges give it. Each vehicle
+    type's graph has its own depot node: one site ``depot`` where all of them are at one
+    place (DCMRTA), else ``depot0``, ``depot1``, ... (HeteroMRTA's test set: a depot per
+    species), each placed by its distances to the tasks (:func:`_depot_at`). ``where``
+    names the files in errors."""
     n = int(_dcmrta_number(_dcmrta_get(planner, "taskNum", where), where))
     counts = _dcmrta_get(planner, "vehNumPerType", where)
     if not isinstance(counts, list) or not counts:
         raise InstanceError(f"{where}: 'vehNumPerType' must be a list of counts")
     traits = [f"cap{c}" for c in range(int(_dcmrta_number(_dcmrta_get(planner, "capNum", where), where)))]
     sites: dict[str, list[float]] = {}
+    depots: list[list[float]] = []
     robots: list[dict[str, Any]] = []
     durations: list[float] = []
+    xy = np.zeros((0, 2))
     for k, count in enumerate(counts):
         vk = f"vehicle{k}"
         dist, speed = _dcmrta_distances(_dcmrta_get(graph, vk, where), n, f"{where} {vk}")
         if not sites:
             xy = _planar(dist, where)
-            sites = {f"t{j}": [float(xy[j, 0]), float(xy[j, 1])] for j in range(n)} | {"depot": [0.0, 0.0]}
+            sites = {f"t{j}": [float(xy[j, 0]), float(xy[j, 1])] for j in range(n)}
             durations = [_dcmrta_number(_dcmrta_get(graph[vk], f"node{j}", f"{where} {vk}"), f"{where} node{j}")
                          for j in range(n)]
+        depots.append([0.0, 0.0] if k == 0 else _depot_at(xy[:n], dist, f"{where} {vk}"))
         caps = _dcmrta_get(_dcmrta_get(vehicles, vk, where), "capVector", f"{where} {vk}")
         if not isinstance(caps, list) or len(caps) != len(traits):
             raise InstanceError(f"{where} {vk}: 'capVector' must hold {len(traits)} amounts")
         amounts = {t: _dcmrta_number(c, f"{where} {vk} capVector") for t, c in zip(traits, caps, strict=True)}
-        robots += [{"id": f"v{k}_{r}", "traits": amounts, "site": "depot", "speed": speed, "home": "depot"}
+        robots += [{"id": f"v{k}_{r}", "traits": amounts, "speed": speed}
                    for r in range(int(_dcmrta_number(count, f"{where} vehNumPerType")))]
+    one = max(math.dist(p, depots[0]) for p in depots) <= 1e-6 * max(1.0, float(np.abs(xy).max(initial=0.0)))
+    sites |= {"depot": depots[0]} if one else {f"depot{k}": p for k, p in enumerate(depots)}
+    for robot in robots:
+        depot = "depot" if one else f"depot{robot['id'][1:].split('_')[0]}"
+        robot |= {"site": depot, "home": depot}
     out_tasks = []
     for j in range(n):
         at = f"{where} task{j}"
@@ -697,4 +734,57 @@ def dcmrta_instance(graph: dict[str, Any], tasks: dict[str, Any], vehicles: dict
             needs[traits[cap]] = needs.get(traits[cap], 0.0) + _dcmrta_number(_dcmrta_get(need, "capReq", at), at)
         out_tasks.append({"id": f"t{j}", "requires": needs, "duration": durations[j], "after": [], "site": f"t{j}"})
     return instance_from_dict({"format": "lvws-instance/1", "name": name, "traits": traits, "objective": "return",
-                               "sites": sites, "robots": robots, "tasks": out_tasks})
+                               "departure": "each", "sites": sites, "robots": robots, "tasks": out_tasks})
+
+
+def ctas_plan(results: dict[str, Any], inst: Instance, where: str) -> Schedule:
+    """The plan of a CTAS-D ``results.yaml`` (already read: its ``vehicle`` routes, each a
+    vehicle ``type`` (1-based) and the ``node`` list it visits, 0 the depot, task ``k`` node
+    ``k + 1``) as a schedule of ``inst`` (:func:`dcmrta_instance` of the same folder): the
+    vehicles of each type are its robots ``v<type>_0``, ``v<type>_1``, ... in the file's
+    order; each task's subteam is the robots that visit it, in each robot's route order.
+    Its times are the order alone (a task's start is its rank among the tasks its robots
+    visit before it): ``lvws import dcmrta --plan`` has the executor carry it out
+    (``"departure": "each"``: each robot sets out once free, the task starts when the last
+    is there), and the makespan then equals the file's ``timeCost`` / 100 (its ``nodeTime``
+    is not read)."""
+    routes = _dcmrta_get(results, "vehicle", where)
+    if not isinstance(routes, dict):
+        raise InstanceError(f"{where} 'vehicle': expected a mapping of routes")
+    used: dict[int, int] = {}
+    teams: dict[int, list[str]] = {}
+    order: dict[str, list[int]] = {}  # each robot's tasks in its route's order
+    for key, route in routes.items():
+        at = f"{where} vehicle {key!r}"
+        kind = int(_dcmrta_number(_dcmrta_get(route, "type", at), at)) - 1
+        rid = f"v{kind}_{used.get(kind, 0)}"
+        used[kind] = used.get(kind, 0) + 1
+        if rid not in inst.robot_index:
+            raise InstanceError(f"{at}: no robot {rid!r} in {inst.name!r} (type {kind + 1})")
+        nodes = _dcmrta_get(route, "node", at)
+        if not isinstance(nodes, list):
+            raise InstanceError(f"{at} 'node': expected a list")
+        for node in nodes:
+            k = int(_dcmrta_number(node, f"{at} node"))
+            if k == 0:
+                continue
+            if not 1 <= k <= inst.num_tasks:
+                raise InstanceError(f"{at}: node {k} is not a task of {inst.name!r}")
+            teams.setdefault(k - 1, []).append(rid)
+            order.setdefault(rid, []).append(k - 1)
+    missing = [inst.tasks[j].id for j in range(inst.num_tasks) if j not in teams]
+    if missing:
+        raise InstanceError(f"{where}: the plan leaves task {missing[0]!r} out")
+    rank = {j: 0 for j in teams}
+    for _ in range(inst.num_tasks):  # a task after every task any of its robots visits before it
+        changed = False
+        for tasks in order.values():
+            for a, b in itertools.pairwise(tasks):
+                if rank[b] <= rank[a]:
+                    rank[b], changed = rank[a] + 1, True
+        if not changed:
+            break
+    else:
+        raise InstanceError(f"{where}: the routes visit tasks in orders that contradict each other")
+    out = [Assignment(inst.tasks[j].id, tuple(sorted(teams[j])), float(rank[j]), rank[j] + 0.5) for j in teams]
+    return Schedule.from_assignments(inst, "ctas-d", out)

@@ -36,6 +36,9 @@ SITE_PREFIX = "@"
 # Additive traits (formats.md, "Traits"): at most this many per instance.
 MAX_TRAITS = 256
 OBJECTIVES = ("makespan", "return")  # the last task's end; the last robot home
+# when a subteam's members set out: together, once the task is given and all are free (the
+# executor's rule, this product's worlds); each, as soon as it is free (formats.md, "departure")
+DEPARTURES = ("together", "each")
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,7 @@ class Instance:
     traits: tuple[str, ...] = ()  # additive traits (formats.md, "Traits"), beside the capabilities
     objective: str = "makespan"  # "return": the makespan ends when the last robot is home
     roles: bool = False  # the default of each task's ``roles``
+    departure: str = "together"  # DEPARTURES: "each" lets a task be given to busy robots, who set out when free
 
     def __post_init__(self) -> None:
         validate_instance(self)
@@ -328,6 +332,8 @@ def validate_instance(inst: Instance) -> None:
         raise InstanceError(f"objective: expected one of {list(OBJECTIVES)}, got {_short(inst.objective)}")
     if not isinstance(inst.roles, bool):
         raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
+    if inst.departure not in DEPARTURES:
+        raise InstanceError(f"departure: expected one of {list(DEPARTURES)}, got {_short(inst.departure)}")
 
 
 def _needs_text(names: Sequence[str], need: FloatArray) -> str:

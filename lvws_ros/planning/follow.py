@@ -7,7 +7,9 @@ the executor or online, whatever happened since it was made:
 * each robot keeps the plan's order of its tasks (by planned start) and each task its
   planned subteam; at a decision step a ready task starts when every member of its subteam
   is free and the task is next in each member's order: the plan re-timed to what the world
-  did (a task late or early moves what follows it, nothing more);
+  did (a task late or early moves what follows it, nothing more); with ``"departure":
+  "each"`` it is given as soon as it is ready and next in each member's order, busy
+  members included, and each member sets out once it is free;
 * a task the plan cannot serve any more (new, or its subteam broken: a member lost, or a
   subteam that no longer covers it, found when it is due, or cannot reach it) is planned
   by GRP among the free robots the plan has nothing left for;
@@ -84,7 +86,9 @@ class PlanFollower:
         if self.instance is not inst:
             self.reset(inst)
         free = set(state.free_robots())
-        for r in free:  # tasks started (as planned or not) since: out of the orders (a busy robot's when it is free)
+        ahead = inst.departure == "each"  # a task may be given to busy members: each sets out once free
+        for r in range(inst.num_robots) if ahead else free:
+            # tasks started (as planned or not) since: out of the orders (a busy robot's when it is free)
             q = self.queue[r]
             while q and state.task_status[q[0]] >= TaskStatus.ASSIGNED:
                 self._drop(q[0])
@@ -93,9 +97,9 @@ class PlanFollower:
         ready = state.ready_tasks()
         out: list[tuple[int, tuple[int, ...]]] = []
         planned = sorted((j for j in ready if j in self.team), key=lambda j: (self.start[j], j))
-        for j in planned:
+        for j in planned:  # by planned start: a task given here may make a member's next one due too ("each")
             team = self.team[j]
-            if all(r in free and self.queue[r][0] == j for r in team):
+            if all((ahead or r in free) and self.queue[r] and self.queue[r][0] == j for r in team):
                 idx = list(team)
                 if not covers(inst.robot_amounts[idx], inst.robot_payload[idx], inst.task_needs[j],
                               inst.tasks[j].payload, bool(inst.task_roles[j])):
@@ -103,9 +107,9 @@ class PlanFollower:
                     continue
                 out.append((j, team))
                 free -= set(team)
-        unplanned = [j for j in ready if j not in self.team]
-        for j, _ in out:
-            self._drop(j)
+                self._drop(j)
+        given = {j for j, _ in out}
+        unplanned = [j for j in ready if j not in self.team and j not in given]
         self.by_plan += len(out)
         idle = sorted(r for r in free if not self.queue[r])  # robots the plan has nothing left for
         if idle and unplanned:

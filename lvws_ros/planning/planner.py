@@ -5,8 +5,10 @@ there is time.
 :class:`~lvws_ros.planning.follow.PlanFollower`) and improves it in rounds:
 
 1. **quick plans** from the state: GRP in critical-path order, GRP, LVWS (each a whole
-   schedule; each within the deadline, in that order: the cheapest first); the shortest
-   is the incumbent;
+   schedule; each within the deadline, in that order: the cheapest first), and where robots
+   set out on their own (``"departure": "each"``) those three carried out so and two list
+   schedules of the robots that can be there soonest (:mod:`~lvws_ros.planning.ahead`);
+   the shortest is the incumbent;
 2. **improvement rounds**, in turn: while at most ``exact_tasks`` tasks are left to do
    (POOL_EXACT_TASKS where the whole model is the pool model), CP-SAT on the whole rest,
    warm-started from the incumbent, in slices that double from EXACT_FIRST (a proof of
@@ -67,6 +69,8 @@ SAMPLE_EVERY = 3  # every this many improvement rounds, one of LVWS sampling
 PATIENCE = 8  # improvement rounds in a row without a shorter plan (a small rest): the planner stops
 PATIENCE_LARGE = 40  # the same for a rest too large for CP-SAT's whole model
 TEMPERATURE_TASKS = 20  # sampling_temperature: the default temperature up to this many tasks to do
+AHEAD_NOISE = 0.5  # "departure": "each": noise on the list schedules' keys, in mean task durations (not tuned)
+AHEAD_SAMPLES = 20  # list schedules of one such round when rounds are counted
 
 __all__ = ["EXACT_TASKS", "Plan", "PlanReport", "Planner", "sampling_temperature"]
 
@@ -208,7 +212,7 @@ class Planner:
         if self.plan is None:  # nothing yet (or not even a quick plan fitted): GRP's, however long it takes
             name, make = self._quick[0]
             t0 = time.perf_counter()
-            res = simulate(state.instance, make(), state=state)
+            res = self._ahead(state, simulate(state.instance, make(), state=state))
             self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
             self.offer(res, state, name)
         return due
@@ -229,10 +233,46 @@ class Planner:
             if name == "lvws":
                 self.lvws_seconds = time.perf_counter() - t0
                 self.round_cost.add(len(state.tasks_to_do()), 1, self.lvws_seconds)
+            res = self._ahead(state, res)
             self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
             self.offer(res, state, name)
+        if state.instance.departure == "each":
+            self._ahead_plans(state, deadline)
         if self.plan is not None:
             self.quick_makespan = self.plan.makespan
+
+    def _ahead_plans(self, state: State, deadline: float | None) -> None:
+        """With ``"departure": "each"``, the list schedules of robots that set out on their
+        own (:func:`~lvws_ros.planning.ahead.earliest_start_plan`, soonest start and soonest
+        end first), each carried out by the executor from ``state``."""
+        from lvws_ros.planning.ahead import earliest_start_plan
+
+        for name, finish in (("earliest-start", False), ("earliest-finish", True)):
+            if deadline is not None and time.perf_counter() >= deadline:
+                return
+            t0 = time.perf_counter()
+            plan = earliest_start_plan(state, finish=finish, deadline=deadline)
+            if plan is None:
+                continue
+            try:
+                res = repair(state, plan)
+            except PolicyError:
+                continue
+            self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
+            self.offer(res, state, name)
+
+    @staticmethod
+    def _ahead(state: State, res: SimulationResult) -> SimulationResult:
+        """With ``"departure": "each"``: ``res``'s subteams and orders carried out with each
+        member setting out once it is free (the quick plans give tasks to free robots only),
+        when that is shorter; ``res`` otherwise."""
+        if state.instance.departure != "each":
+            return res
+        try:
+            ahead = repair(state, res.schedule)
+        except PolicyError:
+            return res
+        return ahead if ahead.schedule.makespan < res.schedule.makespan - TOLERANCE else res
 
     # -- improvement -------------------------------------------------------------------------
 
@@ -248,7 +288,9 @@ class Planner:
             self.proven = True
             return False
         end = time.perf_counter() + self.slice if deadline is None else min(deadline, time.perf_counter() + self.slice)
-        if self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
+        if state.instance.departure == "each" and self.rounds % SAMPLE_EVERY == 1:
+            shorter = self._sample_ahead(state, end)
+        elif self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
             shorter = self._sample(state, todo, end)
         elif self._whole(todo) and not self.exact_closed and (self.exact_rounds <= self.lns_rounds or self.exact_shortened):
             shorter = self._exact(state, end, deadline)
@@ -337,6 +379,26 @@ class Planner:
             return False
         self.lns_window = found.window
         return bool(found.improved) and self.offer_schedule(found.schedule, "lns")
+
+    def _sample_ahead(self, state: State, end: float) -> bool:
+        """A round of randomized list schedules of robots that set out on their own
+        (:func:`~lvws_ros.planning.ahead.earliest_start_plan` with noise on its keys, soonest
+        start or end first at random) until ``end`` (AHEAD_SAMPLES of them when counted);
+        the shortest, carried out by the executor, offered."""
+        from lvws_ros.planning.ahead import earliest_start_plan
+
+        assert self.plan is not None
+        best: Schedule | None = None
+        made = 0
+        while (time.perf_counter() < end) if not self.counted else made < AHEAD_SAMPLES:
+            plan = earliest_start_plan(state, finish=bool(self.rng.random() < 0.5), rng=self.rng,
+                                       noise=AHEAD_NOISE, deadline=None if self.counted else end)
+            made += 1
+            if plan is not None and (best is None or plan.makespan < best.makespan):
+                best = plan
+        if best is None or best.makespan >= self.plan.makespan - TOLERANCE:
+            return False
+        return self.offer_schedule(best, "sample")
 
     def _sample(self, state: State, todo: int, end: float) -> bool:
         assert self.plan is not None

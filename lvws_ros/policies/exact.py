@@ -136,7 +136,9 @@ def left_shift(inst: Instance, sched: Schedule, state: State | None = None) -> S
     robot's task order. The makespan never grows. Without travel every start falls on
     time 0 (or the state's time) or on some task's end, i.e. on a decision step of the
     executor; with travel, the subteam sets out at such a step, as the executor does,
-    and the task starts when its last member is there (:func:`departures`)."""
+    and the task starts when its last member is there (:func:`departures`). With
+    ``"departure": "each"`` a task is given at the step it is ready and its members' tasks
+    before it are given, and each member sets out then or once free, whichever is later."""
     return _shift(inst, sched, state)[0]
 
 
@@ -164,17 +166,26 @@ def _shift(inst: Instance, sched: Schedule, state: State | None) -> tuple[Schedu
                    float(state.task_start[k]), float(state.task_start[k] + inst.durations[k]))
         for k in np.flatnonzero(state.task_status >= TaskStatus.ASSIGNED)]
     leave: dict[str, float] = {}
+    ahead = inst.departure == "each"
+    given = np.full(inst.num_robots, t0)  # "each": when each robot's last task was given to it
     for a in sorted((a for a in sched.assignments if a.task not in fixed), key=lambda a: (a.start, a.task)):
         j = inst.task_index[a.task]
         robots = [inst.robot_index[r] for r in a.robots]
-        depart = max([t0, *(end[inst.tasks[p].id] for p in inst.prerequisites[j]), *(robot_free[r] for r in robots)])
-        start = depart
-        if tr is not None and site is not None:  # the executor's travel: all set out now, the last one arrives
-            start += tr.arrival(robots, [int(site[r]) for r in robots], j)
+        ready = [t0, *(end[inst.tasks[p].id] for p in inst.prerequisites[j])]
+        if ahead:  # given once ready and its members' tasks before it are given; each sets out once free
+            depart = max([*ready, *(given[r] for r in robots)])
+            leaves = [max(depart, robot_free[r]) for r in robots]
+        else:  # the executor's rule: given once ready and every member is free; all set out then
+            depart = max([*ready, *(robot_free[r] for r in robots)])
+            leaves = [depart] * len(robots)
+        start = max(leaves)
+        if tr is not None and site is not None:  # each arrives after its travel; the task starts with the last
+            start = max(t + tr.arrival([r], [int(site[r])], j) for r, t in zip(robots, leaves, strict=True))
             site[robots] = tr.task_to[j]
         stop = start + inst.durations[j]
         end[a.task] = stop
         robot_free[robots] = stop
+        given[robots] = depart
         leave[a.task] = float(depart)
         out.append(Assignment(a.task, a.robots, float(start), float(stop)))
     return Schedule.from_assignments(inst, sched.policy, out, sched.decisions, sched.compute_seconds), leave
@@ -234,7 +245,9 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
                 member: dict[int, dict[int, cp_model.IntVar]], makespan: cp_model.IntVar) -> _TravelVars | None:
     """The executor's travel. Each task has a departure D_j: its subteam sets out once the
     task is ready and every member is free, and the task starts when the last member is
-    there. Per robot, a circuit through its start (node 0) and the tasks it may do; its
+    there (with ``"departure": "each"``, D_j is when the task is given: once it is ready and
+    each member's task before it is given; each member sets out then or when its task
+    before ends, whichever is later). Per robot, a circuit through its start (node 0) and the tasks it may do; its
     successor literals carry the travel between consecutive tasks (rounded up to ticks,
     so a schedule of the model is valid in real time). With the objective "return" the arc
     back to the start node carries the way home: the makespan is when the last robot is
@@ -252,6 +265,7 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
         for p in inst.prerequisites[j]:  # ready when it sets out
             model.add(depart[j] >= (start[p] + h.dur[p] if p in h.dur else h.ticks(h.fixed_end[p])))
     back = inst.objective == "return"
+    ahead = inst.departure == "each"
     out = _TravelVars(depart, {})
     for r in range(inst.num_robots):
         tasks = [j for j in h.todo if r in member[j]]
@@ -279,7 +293,10 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
             named[None, j], named[j, None] = first, last
             if back:
                 model.add(makespan >= start[j] + h.dur[j] + up(tr.time(r, tr.task_to[j], tr.home(r)))).only_enforce_if(last)
-            model.add(depart[j] >= h.free_at[r]).only_enforce_if(first)
+            if ahead:  # sets out once free, even before the task is given
+                model.add(start[j] >= h.free_at[r] + up(reach)).only_enforce_if(first)
+            else:
+                model.add(depart[j] >= h.free_at[r]).only_enforce_if(first)
             model.add(start[j] >= depart[j] + up(reach)).only_enforce_if(first)
             for k in tasks:
                 move = tr.time(r, tr.task_to[j], tr.task_from[k])
@@ -288,7 +305,11 @@ def _add_travel(model: cp_model.CpModel, inst: Instance, state: State, h: _Horiz
                 lit = model.new_bool_var(f"next_{r}_{j}_{k}")
                 arcs.append((node[j], node[k], lit))
                 named[j, k] = lit
-                model.add(depart[k] >= start[j] + h.dur[j]).only_enforce_if(lit)
+                if ahead:  # given after the task before it; sets out when that one ends
+                    model.add(depart[k] >= depart[j]).only_enforce_if(lit)
+                    model.add(start[k] >= start[j] + h.dur[j] + up(move)).only_enforce_if(lit)
+                else:
+                    model.add(depart[k] >= start[j] + h.dur[j]).only_enforce_if(lit)
                 model.add(start[k] >= depart[k] + up(move)).only_enforce_if(lit)
         model.add_circuit(arcs)
     return out
@@ -309,20 +330,22 @@ def _hint_travel(inst: Instance, state: State, model: cp_model.CpModel, tv: _Tra
                    key=lambda j: (by_task[inst.tasks[j].id].start, j))
     now = h.ticks(state.time)
     free, prev = list(h.free_at), [-1] * inst.num_robots
+    given = [now] * inst.num_robots  # "each": when each robot's task before was given
+    ahead = inst.departure == "each"
     end: dict[int, int] = {}
     for j in order:
         members = sorted(teams.get(j, ()))
         ready = [end[p] if p in end else h.ticks(h.fixed_end.get(p, state.time)) for p in inst.prerequisites[j]]
-        depart = max([now, *ready, *(free[r] for r in members)])
-        at = [depart + h.up(tr.arrival([r], [int(state.robot_site[r])], j) if prev[r] < 0
-                            else tr.time(r, tr.task_to[prev[r]], tr.task_from[j])) for r in members]
+        depart = max([now, *ready, *((given if ahead else free)[r] for r in members)])
+        at = [max(depart, free[r]) + h.up(tr.arrival([r], [int(state.robot_site[r])], j) if prev[r] < 0
+                                          else tr.time(r, tr.task_to[prev[r]], tr.task_from[j])) for r in members]
         begin = max([depart, model.proto.variables[start[j].index].domain[0], *at])
         end[j] = begin + h.dur[j]
         model.add_hint(start[j], begin)
         if j in tv.depart:
             model.add_hint(tv.depart[j], depart)
         for r in members:
-            free[r], prev[r] = end[j], j
+            free[r], prev[r], given[r] = end[j], j, depart
     for r, named in tv.arcs.items():
         mine = [j for a, j in named if a is None and j is not None]  # the tasks in the robot's circuit
         robot_order = sorted((j for j in mine if r in teams.get(j, ())),
@@ -878,13 +901,15 @@ class ExactPolicy:
             self.solves += 1
         assert now is not None  # the plan's step: the world's, or the state's when just planned
         free = set(state.free_robots())
+        ahead = inst.departure == "each"  # busy robots may be given their next tasks, in the plan's order
         out = []
-        for j in state.ready_tasks():
+        planned_start = {j: a.start for j, a in self._plan.items()}
+        for j in sorted(state.ready_tasks(), key=lambda k: (planned_start.get(k, 0.0), k)):
             a = self._plan.get(j)
             if a is None or abs(self._leave.get(a.task, a.start) - now) > TOLERANCE:
                 continue
             team = tuple(inst.robot_index[r] for r in a.robots)
-            if set(team) <= free:
+            if ahead or set(team) <= free:
                 out.append((j, team))
                 free -= set(team)
         return Decision(tuple(out), tuple(sorted(free)))

@@ -351,6 +351,7 @@ def critical_chain(inst: Instance, inc: Schedule) -> list[int]:
                 previous[r, j] = last_of[r]
             last_of[r] = j
     travel = inst.travel
+    ahead = inst.departure == "each"
 
     def way(r: int, j: int) -> float:  # from where the robot's task before j leaves it (or where it starts)
         if travel is None:
@@ -368,12 +369,15 @@ def critical_chain(inst: Instance, inc: Schedule) -> list[int]:
         # the subteam sets out once the task is ready and every member is free, and starts
         # when the last member is there (the executor's rule)
         departs = start[j] - max(way(r, j) for r in team[j])
-        held = [(end[q], q) for q in inst.prerequisites[j] if q in end]
-        held += [(end[k], k) for r in team[j] if (k := previous.get((r, j))) is not None]
+        held = [(end[q] - departs, q) for q in inst.prerequisites[j] if q in end]
+        if ahead:  # each member sets out once free: a member's task before holds it up by its own way
+            held += [(end[k] - (start[j] - way(r, j)), k) for r in team[j] if (k := previous.get((r, j))) is not None]
+        else:
+            held += [(end[k] - departs, k) for r in team[j] if (k := previous.get((r, j))) is not None]
         if not held:
             break
-        when, k = max(held)
-        if when < departs - TOLERANCE * max(1.0, abs(departs)) or k in chain:
+        slack, k = max(held)
+        if slack < -TOLERANCE * max(1.0, abs(departs)) or k in chain:
             break
         chain.append(k)
         j = k

@@ -9,8 +9,9 @@ from the ``plotly`` wheel), updated over a websocket twice a second:
   (longest by duration) drawn thick;
 * each robot's state (a table) and the cell picture: sites and robots at their poses;
 * diagnostics and the decision latency per step;
-* live: buttons for the simulator's services (submit tasks from a YAML file, cancel a
-  task, fail or repair a robot), with the service's answer shown (none with ``--read-only``).
+* live: buttons for the world's services, the simulator's or the dispatcher's (submit tasks
+  from a YAML file, cancel a task, fail or repair a robot), with the service's answer shown
+  (none with ``--read-only``).
 
 Access: the views (``/view``, the websocket) and every control action (``POST /world``)
 need the dashboard's token, generated at start (:func:`~lvws_ros.ros.launcher.new_token`) and printed in the page's
@@ -344,16 +345,18 @@ class LiveFeed:
 
     def call(self, kind: str, *, tasks: list[dict[str, Any]] | None = None, target: str = "",
              failed: bool = True, timeout: float = 10.0) -> tuple[bool, str]:
-        """One of the simulator's services; (accepted, its message)."""
+        """One of the world's services (the simulator's or the dispatcher's: for a submit,
+        the type served decides, as for ``lvws submit``); (accepted, its message)."""
         from lvws_ros.ros.service_call import call as call_service
         from lvws_ros.ros.service_call import ready
-        from lvws_ros.ros.world_client import SERVICES, world_request
+        from lvws_ros.ros.world_client import SERVICES, served_type, world_request
 
-        srv, request = world_request(kind, tasks=tasks or [], target=target, failed=failed)
+        submit_type = served_type(self.node, SERVICES[kind], timeout) if kind == "submit" else ""
+        srv, request = world_request(kind, tasks=tasks or [], target=target, failed=failed, submit_type=submit_type)
         client = self.node.create_client(srv, SERVICES[kind])
         try:
             if not ready(client, timeout):
-                return False, f"no simulator answers on {client.srv_name}"
+                return False, f"no world answers on {client.srv_name}"
 
             def wait(future: Any, seconds: float) -> bool:  # the executor's thread completes it
                 done = threading.Event()

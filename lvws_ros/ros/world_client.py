@@ -19,7 +19,7 @@ from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.ros.convert import cell_task_to_msg
 from lvws_ros.sim.config import read_yaml
 
-__all__ = ["SERVICES", "call_world", "join_domain", "tasks_from_file", "world_request"]
+__all__ = ["SERVICES", "call_world", "join_domain", "served_type", "tasks_from_file", "world_request"]
 
 SERVICES = {"submit": "submit_tasks", "cancel": "cancel_task", "fault": "set_robot_fault"}
 
@@ -66,7 +66,7 @@ def world_request(kind: str, *, tasks: Sequence[dict[str, Any]] = (), target: st
     raise LvwsError(f"unknown world change {kind!r}; one of {', '.join(SERVICES)}")
 
 
-def _served_type(node: Any, name: str, timeout: float) -> str:
+def served_type(node: Any, name: str, timeout: float) -> str:
     """The type of the service ``name`` (relative to ``node``) once it is seen ('' if never)."""
     full = node.resolve_service_name(name)
     end = time.monotonic() + timeout
@@ -91,7 +91,7 @@ def call_world(kind: str, *, namespace: str = "", tasks: Sequence[dict[str, Any]
     try:
         node = rclpy.create_node("lvws_world_client", namespace=namespace or None)
         srv, request = world_request(kind, tasks=tasks, target=target, failed=failed,
-                                     submit_type=_served_type(node, SERVICES[kind], timeout) if kind == "submit" else "")
+                                     submit_type=served_type(node, SERVICES[kind], timeout) if kind == "submit" else "")
         client = node.create_client(srv, SERVICES[kind])
         name = client.srv_name
         if not ready(client, timeout):

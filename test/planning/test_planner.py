@@ -212,3 +212,51 @@ def test_cp_sat_keeps_the_next_round_while_its_slices_shorten_the_plan():
     if not planner.exact_shortened:
         planner.improve()
         assert planner.lns_rounds == 1
+
+
+def _each_cells() -> list[Instance]:
+    """Travel cells whose robots set out on their own (``"departure": "each"``): the held-out
+    depot family and traits with the way home, as the coalition benchmarks run."""
+    from dataclasses import replace
+
+    return [replace(inst, departure="each") for inst in (_cells()[0], _cells()[2])]
+
+
+@pytest.mark.parametrize("k", range(2))
+def test_with_robots_setting_out_on_their_own_plans_are_carried_out_as_made_and_never_later(k):
+    """CP-SAT's plan of such a cell is carried out exactly (its subteams, orders and
+    makespan); GRP's plan (free robots only) carried out so is never later than GRP's
+    own; CP-SAT's optimum there is never above the one of subteams sent off together."""
+    from dataclasses import replace
+
+    inst = _each_cells()[k]
+    exact = solve_exact(inst, time_limit=10, workers=2)
+    assert exact.schedule is not None
+    again = repair(State.initial(inst), exact.schedule).schedule
+    assert check_schedule(inst, again) == []
+    assert again.makespan == pytest.approx(exact.schedule.makespan)
+    assert {a.task: a.robots for a in again.assignments} == {a.task: a.robots for a in exact.schedule.assignments}
+    grp = simulate(inst, GreedyPayloadPolicy()).schedule
+    ahead = repair(State.initial(inst), grp).schedule
+    assert check_schedule(inst, ahead) == [] and ahead.makespan <= grp.makespan + 1e-9
+    together = solve_exact(replace(inst, departure="together"), time_limit=10, workers=2)
+    if exact.proven and together.proven:
+        assert exact.makespan <= together.makespan + 1e-6
+
+
+def test_with_robots_setting_out_on_their_own_the_planner_is_valid_never_longer_and_deterministic():
+    inst = _each_cells()[1]
+    from lvws_ros.planning.ahead import earliest_start_plan
+
+    quick = earliest_start_plan(State.initial(inst))
+    assert quick is not None and check_schedule(inst, quick) == []
+    plans = []
+    for _ in range(2):
+        planner = Planner(seed=2, workers=1, learned=False, work=0.2)
+        seen: list[float] = []
+        planner.run(State.initial(inst), iterations=4, on_report=lambda r, heard=seen: heard.append(r.makespan))
+        assert planner.plan is not None and check_schedule(inst, planner.plan.schedule) == []
+        assert seen[0] <= repair(State.initial(inst), quick).schedule.makespan + 1e-9
+        assert all(b <= a + 1e-9 for a, b in itertools.pairwise(seen))
+        plans.append(sorted((a.task, a.robots, round(a.start, 9)) for a in planner.plan.schedule.assignments))
+    assert plans[0] == plans[1]

@@ -335,6 +335,8 @@ def test_on_sim_time_the_cell_runs_on_the_simulated_clock(ros_context, tmp_path)
 def test_cancel_task_cancels_every_members_goal_and_bad_assignments_are_named_not_fatal(ros_context, tmp_path):
     from lvws_msgs.srv import CancelTask
 
+    from lvws_ros.ros.dashboard import CellView, LiveFeed
+
     slow = {**CELL, "tasks": [{**t, "duration": 60} if t["id"] == "t1" else t for t in CELL["tasks"]]}
     with cell(ros_context, tmp_path, "lvws_dispatch_cancel", data=slow) as c:
         pub = c.node.create_publisher(AssignmentArray, ASSIGNMENTS_TOPIC, ASSIGNMENTS_QOS)
@@ -351,6 +353,13 @@ def test_cancel_task_cancels_every_members_goal_and_bad_assignments_are_named_no
         submit = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "submit", str(more)], capture_output=True,
                                 text=True, timeout=60)
         assert submit.returncode == 0 and "t9 added" in submit.stdout, submit.stdout + submit.stderr
+        feed = LiveFeed(CellView())  # the dashboard's submit button: the same service, its type found
+        try:
+            ok, message = feed.call("submit", tasks=[{"id": "t10", "capabilities": [0, 0, 1, 0], "payload": 0,
+                                                      "duration": 1, "after": ["t9"], "site": "a"}])
+        finally:
+            feed.close()
+        assert ok and "t10 added" in message, message
         client = c.node.create_client(CancelTask, "cancel_task")
         assert ready(client, 10.0)
         answer = call(client, CancelTask.Request(task_id="t1"), lambda f, s: c.spin(s, f.done), 10.0)
@@ -360,7 +369,7 @@ def test_cancel_task_cancels_every_members_goal_and_bad_assignments_are_named_no
         assert c.spin(60, c.done), c.output("dispatcher")
         assert c.procs["dispatcher"].poll() is None  # alive
     assert len(members) > 1 and "t1" not in {t.id for t in c.graphs[-1].tasks}
-    assert "t9" in {e.task_id for e in c.of(GoalEvent.KIND_SUCCEEDED)}  # submitted with lvws submit, and done
+    assert {"t9", "t10"} <= {e.task_id for e in c.of(GoalEvent.KIND_SUCCEEDED)}  # lvws submit, dashboard: done
     assert any("unknown robot 'ghost'" in d for d in c.diags), c.diags
     assert any("unknown task 't99'" in d for d in c.diags), c.diags
 
