@@ -14,8 +14,8 @@ from sphinx.cmd.build import build_main
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 PAGES = ("index", "install", "offline", "ros", "robots", "dashboard", "formats", "architecture", "learning", "results", "scale",
          "sampling_and_self_improvement", "benchmarks", "wait_head_experiment", "api/index", "api/core",
-         "api/policies", "api/learning", "api/sim", "api/ros", "api/robot", "tutorials/own_cell", "tutorials/fleet",
-         "tutorials/fine_tune")
+         "api/policies", "api/learning", "api/sim", "api/planning", "api/ros", "api/robot", "tutorials/own_cell",
+         "tutorials/fleet", "tutorials/fine_tune")
 
 
 class _Links(HTMLParser):

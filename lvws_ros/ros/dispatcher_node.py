@@ -134,6 +134,9 @@ class DispatcherNode(Node):
             raise ConfigError("no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
         self.cell_path = path
         self.cell = Dispatch(load_instance(path), present=[])
+        if self.cell.inst.departure != "together":  # the messages carry no departure: goals go to free robots
+            self.get_logger().warning(f"{path}: \"departure\": \"{self.cell.inst.departure}\" is planned offline "
+                                      "only; this cell's subteams are sent off together (docs/formats.md)")
         self.team_pub = self.create_publisher(TeamState, topics.TEAM_TOPIC, topics.TEAM_QOS)
         self.graph_pub = self.create_publisher(TaskGraph, topics.GRAPH_TOPIC, topics.GRAPH_QOS)
         self.events_pub = self.create_publisher(GoalEvent, topics.GOAL_EVENTS_TOPIC, topics.GOAL_EVENTS_QOS)
