@@ -83,6 +83,8 @@ def earliest_start_plan(state: State, finish: bool = False, deadline: float | No
                                                            inst.task_needs[j], inst.tasks[j].payload,
                                                            bool(inst.task_roles[j])):
                 break
+        else:  # with roles, the whole team may not cover it
+            return None
         team = prune(team[::-1], inst.robot_amounts, inst.robot_payload, inst.task_needs[j], inst.tasks[j].payload,
                      roles=bool(inst.task_roles[j]))
         start = max(float(ready[c]), *(float(times[r, c]) for r in team))
