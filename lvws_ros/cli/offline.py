@@ -168,7 +168,7 @@ def _import_ctas_plan(path: Path, inst: Instance, out: str) -> None:
     executed = repair(State.initial(inst), ctas_plan(results, inst, str(path))).schedule
     executed.policy = "ctas-d"
     save_schedule(executed, out)
-    print(f"{out}: the plan of {path}, makespan {executed.makespan:g}", file=sys.stderr)
+    print(f"{out}: the plan of {path}, makespan {executed.makespan:g}")
 
 
 def cmd_import(args: argparse.Namespace) -> int:

@@ -118,3 +118,15 @@ def test_the_shipped_benchmarks_let_robots_set_out_on_their_own():
         files = sorted(folder.glob("env_*.json"))
         assert len(files) == count
         assert all(load_instance(f).departure == "each" for f in files)
+
+
+def test_a_missing_or_broken_plan_is_refused_naming_the_file(tmp_path):
+    res = _import(FOLDER, "--out", tmp_path / "x.json", "--plan", tmp_path / "plan.json")  # DCMRTA ships no results
+    assert res.returncode == 2 and "results.yaml" in res.stderr and "Traceback" not in res.stderr
+    bad = tmp_path / "bad"
+    shutil.copytree(HETERO / "env_0", bad)
+    text = (bad / "results.yaml").read_text()
+    (bad / "results.yaml").write_text(text.replace("node: [0, 13, 8, 2, 4, 0]", "node: [0, 13, 8, 2, 99, 0]", 1))
+    res = _import(bad, "--out", tmp_path / "x.json", "--plan", tmp_path / "plan.json")
+    assert res.returncode == 2 and "node 99" in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "plan.json").exists()
