@@ -27,6 +27,7 @@ import numpy as np
 from lvws_ros.core.formats import instance_from_dict
 from lvws_ros.core.problem import Instance, Robot, Task
 from lvws_ros.core.schedule import Assignment, Schedule
+from lvws_ros.core.subteams import covers
 from lvws_ros.core.travel import build_travel
 from lvws_ros.errors import InstanceError
 
@@ -652,6 +653,30 @@ def _planar(dist: np.ndarray, where: str) -> np.ndarray:
     return centred
 
 
+def _trilaterate(xy: np.ndarray, d: np.ndarray, scale: float) -> np.ndarray:
+    """A point of the plane at distances ``d`` from the points ``xy`` (exact for consistent
+    data): from the points' own frame (their first point at the origin, their principal
+    direction first), the coordinate along each direction the points span is linear in the
+    squared distances; across a direction they do not span (collinear points, one point)
+    the offset is what the distance leaves (one of two mirror images, both consistent)."""
+    if len(xy) == 0:
+        return np.zeros(2)
+    origin = xy[0]
+    _, sv, vt = np.linalg.svd(xy - origin)
+    spanned = int(np.sum(sv > 1e-9 * scale))
+    frame = (xy - origin) @ vt.T  # coordinates in the frame: (n, 2)
+    q = np.zeros(2)
+    if spanned:
+        # |q - f_j|^2 = d_j^2, less the same for f_0 = 0: 2 f_j . q = |f_j|^2 - d_j^2 + d_0^2
+        a = 2.0 * frame[1:, :spanned]
+        b = (frame[1:, :spanned] ** 2).sum(axis=1) - d[1:] ** 2 + d[0] ** 2
+        q[:spanned] = np.linalg.lstsq(a, b, rcond=None)[0]
+    if spanned < 2:
+        q[1] = math.sqrt(max(0.0, float(d[0] ** 2 - q[0] ** 2)))
+    out: np.ndarray = origin + q @ vt
+    return out
+
+
 def _depot_at(tasks_xy: np.ndarray, dist: np.ndarray, where: str) -> list[float]:
     """The point whose straight-line distances to the tasks' points ``tasks_xy`` are the
     depot row of ``dist`` (a vehicle type's graph, its depot last): trilateration, exact for
@@ -663,10 +688,7 @@ def _depot_at(tasks_xy: np.ndarray, dist: np.ndarray, where: str) -> list[float]
         raise InstanceError(f"{where}: its distances among the tasks differ from the first vehicle type's "
                             f"(off by {err:.3g})")
     d = dist[n, :n]
-    # |p - x_j|^2 = d_j^2, less the same for task 0: linear in p
-    a = 2.0 * (tasks_xy[1:] - tasks_xy[0])
-    b = d[0] ** 2 - d[1:] ** 2 + (tasks_xy[1:] ** 2).sum(axis=1) - (tasks_xy[0] ** 2).sum()
-    p = np.linalg.lstsq(a, b, rcond=None)[0]
+    p = _trilaterate(tasks_xy, d, scale)
     off = np.abs(np.linalg.norm(tasks_xy - p, axis=1) - d).max()
     if off > 1e-6 * scale:
         raise InstanceError(f"{where}: its depot's distances are not those of a point in the tasks' plane "
@@ -775,6 +797,12 @@ def ctas_plan(results: dict[str, Any], inst: Instance, where: str) -> Schedule:
     missing = [inst.tasks[j].id for j in range(inst.num_tasks) if j not in teams]
     if missing:
         raise InstanceError(f"{where}: the plan leaves task {missing[0]!r} out")
+    for j, team in sorted(teams.items()):
+        idx = [inst.robot_index[r] for r in team]
+        if len(set(idx)) != len(idx) or not covers(inst.robot_amounts[idx], inst.robot_payload[idx],
+                                                   inst.task_needs[j], inst.tasks[j].payload, bool(inst.task_roles[j])):
+            raise InstanceError(f"{where}: the robots visiting task {inst.tasks[j].id!r} ({', '.join(team)}) "
+                                "do not cover it (or one visits it twice)")
     rank = {j: 0 for j in teams}
     for _ in range(inst.num_tasks):  # a task after every task any of its robots visits before it
         changed = False

@@ -7,7 +7,9 @@ robots that can be there soonest, busy ones included. :func:`earliest_start_plan
 whole schedule so (list scheduling):
 
 * each robot is available from a time at a site (the end of the last task given to it, where
-  that task leaves it; at first, the state's);
+  that task leaves it; at first, the state's); a task is given (as the executor gives it) once
+  it is ready and its members' tasks before it are given, and each member sets out then or
+  once free, whichever is later: the schedule's times are the executor's;
 * at each step, for every task whose prerequisites are all placed, the earliest time its
   subteam can be there (:func:`~lvws_ros.core.subteams.earliest_cover` over the robots'
   arrival times: available, then the travel); the task that can start first is placed (ties:
@@ -46,6 +48,7 @@ def earliest_start_plan(state: State, finish: bool = False, deadline: float | No
     inst = state.instance
     tr = inst.travel
     free = np.maximum(state.robot_free_at.astype(float), state.time)
+    given = np.full(inst.num_robots, float(state.time))  # when each robot's last task was given to it
     site = None if state.robot_site is None else state.robot_site.copy()
     end = {j: float(state.task_start[j] + inst.durations[j])
            for j in np.flatnonzero(state.task_status >= TaskStatus.ASSIGNED).tolist()}
@@ -60,8 +63,11 @@ def earliest_start_plan(state: State, finish: bool = False, deadline: float | No
         if not open_:
             return None
         ready = np.array([max([state.time, *(end[p] for p in inst.prerequisites[j])]) for j in open_])
-        leave = np.maximum(free[:, None], ready[None, :])
-        times = leave if tr is None or site is None else leave + tr.arrivals(robots, site, open_)
+        # a task is given once ready and its members' tasks before it are given; each sets out then
+        # or once free (the executor's rule): per robot, a time no member can beat
+        leave = np.maximum(np.maximum(free, given)[:, None], ready[None, :])
+        way = np.zeros(leave.shape) if tr is None or site is None else tr.arrivals(robots, site, open_)
+        times = leave + way
         first = earliest_cover(times, inst.robot_amounts, inst.robot_payload, inst.task_needs[open_],
                                inst.task_payload[open_])
         dur = inst.durations[open_]
@@ -87,9 +93,11 @@ def earliest_start_plan(state: State, finish: bool = False, deadline: float | No
             return None
         team = prune(team[::-1], inst.robot_amounts, inst.robot_payload, inst.task_needs[j], inst.tasks[j].payload,
                      roles=bool(inst.task_roles[j]))
-        start = max(float(ready[c]), *(float(times[r, c]) for r in team))
+        depart = max(float(ready[c]), *(float(given[r]) for r in team))  # when the executor gives it
+        start = max(depart, *(max(depart, float(free[r])) + float(way[r, c]) for r in team))
         stop = start + float(inst.durations[j])
         free[team] = stop
+        given[team] = depart
         if site is not None and tr is not None:
             site[team] = tr.task_to[j]
         end[j] = stop

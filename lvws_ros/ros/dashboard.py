@@ -352,6 +352,8 @@ class LiveFeed:
         from lvws_ros.ros.world_client import SERVICES, served_type, world_request
 
         submit_type = served_type(self.node, SERVICES[kind], timeout) if kind == "submit" else ""
+        if kind == "submit" and not submit_type:  # nothing serves it: say so now (not after a second wait)
+            return False, f"no world answers on {self.node.resolve_service_name(SERVICES[kind])}"
         srv, request = world_request(kind, tasks=tasks or [], target=target, failed=failed, submit_type=submit_type)
         client = self.node.create_client(srv, SERVICES[kind])
         try:

@@ -4,7 +4,8 @@ the scheduler node uses, from snapshots that give the nominal durations, while e
 takes its duration times a seeded factor in [1 - noise, 1 + noise] (:func:`duration_factor`,
 the rule of the cell simulator too). Robots travel as the executor says (travel
 extension); decisions happen when tasks end, as in the executor. With noise 0 the run is
-the executor's.
+the executor's, but for a file with ``"departure": "each"``: online, as in the ROS worlds,
+subteams are sent off together (the snapshots carry no departure).
 
 ``lvws solve INSTANCE --noise 0.3 --noise-seed S`` prints the planned makespan (the
 policy in the executor) against the executed one.

@@ -130,3 +130,45 @@ def test_a_missing_or_broken_plan_is_refused_naming_the_file(tmp_path):
     res = _import(bad, "--out", tmp_path / "x.json", "--plan", tmp_path / "plan.json")
     assert res.returncode == 2 and "node 99" in res.stderr and "Traceback" not in res.stderr
     assert not (tmp_path / "plan.json").exists()
+
+
+def test_a_plan_whose_visitors_do_not_cover_a_task_is_refused_naming_it(tmp_path):
+    bad = tmp_path / "bad"
+    shutil.copytree(HETERO / "env_0", bad)
+    text = (bad / "results.yaml").read_text()
+    (bad / "results.yaml").write_text(text.replace("node: [0, 13, 8, 2, 4, 0]", "node: [0, 13, 8, 2, 0]", 1))
+    res = _import(bad, "--out", tmp_path / "x.json", "--plan", tmp_path / "plan.json")
+    assert res.returncode == 2 and "'t3'" in res.stderr and "do not cover" in res.stderr, res.stderr
+    assert not (tmp_path / "plan.json").exists()
+
+
+def _line_graph(points: list[tuple[float, float]], depot: tuple[float, float]) -> dict[str, Any]:
+    """One vehicle type's CTAS-D graph: the tasks at ``points``, its depot (nodes n and n + 1)."""
+    where = [*points, depot, depot]
+    edges = {}
+    for a in range(len(where)):
+        for b in range(len(where)):
+            if a != b:
+                d = float(np.hypot(where[a][0] - where[b][0], where[a][1] - where[b][1]))
+                edges[f"edge{len(edges)}"] = [a, b, 0, d, 0, d / 0.2]
+    return {**edges, **{f"node{j}": 1.0 for j in range(len(points))}}
+
+
+@pytest.mark.parametrize("points", [[(0.0, 1.0), (1.0, 1.0), (3.0, 1.0)], [(0.0, 1.0), (1.0, 1.0)], [(0.5, 0.5)]])
+def test_a_depot_is_placed_when_the_tasks_lie_on_a_line_or_are_one(points):
+    """Trilateration from collinear tasks (or one) leaves a mirror image: either keeps every distance."""
+    from lvws_ros.core.importers import dcmrta_instance
+
+    n = len(points)
+    graph = {"vehicle0": _line_graph(points, (0.0, 0.0)), "vehicle1": _line_graph(points, (2.0, 3.0))}
+    tasks = {f"task{j}": {"and0": {"or0": {"capId": j % 2, "capReq": 1.0, "capVar": 0.0, "geq": True}}}
+             for j in range(n)}
+    vehicles = {"vehicle0": {"capVector": [1.0, 0.0]}, "vehicle1": {"capVector": [0.0, 1.0]}}
+    planner = {"taskNum": n, "vehNumPerType": [1, 1], "capNum": 2}
+    inst = dcmrta_instance(graph, tasks, vehicles, planner, "line", "line")
+    tr = inst.travel
+    assert tr is not None
+    for j, (x, y) in enumerate(points):
+        for r, depot in ((0, (0.0, 0.0)), (1, (2.0, 3.0))):
+            assert tr.time(r, tr.robot_site[r], tr.task_from[j]) == pytest.approx(
+                np.hypot(x - depot[0], y - depot[1]) / 0.2)

@@ -260,3 +260,28 @@ def test_with_robots_setting_out_on_their_own_the_planner_is_valid_never_longer_
         assert all(b <= a + 1e-9 for a, b in itertools.pairwise(seen))
         plans.append(sorted((a.task, a.robots, round(a.start, 9)) for a in planner.plan.schedule.assignments))
     assert plans[0] == plans[1]
+
+
+def test_the_list_schedule_is_timed_as_the_executor_carries_it_out():
+    """A task is given once its members' tasks before it are given: B's task P is given at 10,
+    so J (A and B) is given then too, and A, free at x from 0, sets out at 10 and arrives at 30
+    (not at 20, as leaving when free would have it)."""
+    from lvws_ros.planning.ahead import earliest_start_plan
+
+    inst = instance_from_dict({
+        "format": "lvws-instance/1", "name": "given-in-order", "traits": ["a", "b", "c"], "departure": "each",
+        "sites": {"x": [0, 0], "y": [20, 0]},
+        "robots": [{"id": "A", "traits": {"a": 1}, "site": "x", "speed": 1.0},
+                   {"id": "B", "traits": {"b": 1}, "site": "y", "speed": 1.0},
+                   {"id": "C", "traits": {"c": 1}, "site": "y", "speed": 1.0}],
+        "tasks": [{"id": "Q", "requires": {"c": 1}, "duration": 10, "after": [], "site": "y"},
+                  {"id": "P", "requires": {"b": 1}, "duration": 10, "after": ["Q"], "site": "y"},
+                  {"id": "J", "requires": {"a": 1, "b": 1}, "duration": 1, "after": [], "site": "y"}]})
+    for inst_ in (inst, *_each_cells()):
+        plan = earliest_start_plan(State.initial(inst_))
+        assert plan is not None and check_schedule(inst_, plan) == []
+        carried = repair(State.initial(inst_), plan).schedule
+        assert carried.makespan == pytest.approx(plan.makespan)
+        assert {a.task: a.robots for a in carried.assignments} == {a.task: a.robots for a in plan.assignments}
+    plan = earliest_start_plan(State.initial(inst))
+    assert plan is not None and plan.by_task()["J"].start == pytest.approx(30.0)
