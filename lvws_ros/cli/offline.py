@@ -127,24 +127,28 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return 0
 
 
-def _import_dcmrta(folder: Path, name: str | None) -> Instance:
-    """One instance of the DCMRTA / CTAS-D test sets: its four YAML files, read with
-    PyYAML's safe loader (plain data, nothing in them runs)."""
+def _yaml_mapping(path: Path) -> dict[str, Any]:
+    """A YAML file's top mapping, read with PyYAML's safe loader (plain data, nothing in it
+    runs); an error naming the file when it is missing, not YAML, or not a mapping."""
     import yaml
 
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InstanceError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    except yaml.YAMLError as exc:
+        raise InstanceError(f"{path}: not YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise InstanceError(f"{path}: expected a mapping at the top")
+    return data
+
+
+def _import_dcmrta(folder: Path, name: str | None) -> Instance:
+    """One instance of the DCMRTA / CTAS-D test sets: its four YAML files (:func:`_yaml_mapping`)."""
     from lvws_ros.core.importers import dcmrta_instance
 
-    docs: dict[str, Any] = {}
-    for part in ("graph", "task_param", "vehicle_param", "planner_param"):
-        path = folder / f"{part}.yaml"
-        try:
-            docs[part] = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise InstanceError(f"{path}: cannot read it ({exc.strerror or exc})") from None
-        except yaml.YAMLError as exc:
-            raise InstanceError(f"{path}: not YAML ({str(exc).splitlines()[0]})") from None
-        if not isinstance(docs[part], dict):
-            raise InstanceError(f"{path}: expected a mapping at the top")
+    docs = {part: _yaml_mapping(folder / f"{part}.yaml")
+            for part in ("graph", "task_param", "vehicle_param", "planner_param")}
     return dcmrta_instance(docs["graph"], docs["task_param"], docs["vehicle_param"], docs["planner_param"],
                            name or folder.name, str(folder))
 
@@ -152,22 +156,12 @@ def _import_dcmrta(folder: Path, name: str | None) -> Instance:
 def _import_ctas_plan(path: Path, inst: Instance, out: str) -> None:
     """The CTAS-D MILP's plan of ``path`` (its routes: :func:`~lvws_ros.core.importers.ctas_plan`)
     carried out by the executor from the start, written to ``out`` as a schedule."""
-    import yaml
-
     from lvws_ros.core.executor import State
     from lvws_ros.core.formats import save_schedule
     from lvws_ros.core.importers import ctas_plan
     from lvws_ros.planning.follow import repair
 
-    try:
-        results = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InstanceError(f"{path}: cannot read it ({exc.strerror or exc})") from None
-    except yaml.YAMLError as exc:
-        raise InstanceError(f"{path}: not YAML ({str(exc).splitlines()[0]})") from None
-    if not isinstance(results, dict):
-        raise InstanceError(f"{path}: expected a mapping at the top")
-    executed = repair(State.initial(inst), ctas_plan(results, inst, str(path))).schedule
+    executed = repair(State.initial(inst), ctas_plan(_yaml_mapping(path), inst, str(path))).schedule
     executed.policy = "ctas-d"
     save_schedule(executed, out)
     print(f"{out}: the plan of {path}, makespan {executed.makespan:g}")
