@@ -388,7 +388,7 @@ def reproduce(out: Path, *, data_seed: int = 0, policy_seed: int = 0, time_limit
             except BaseException:  # a failed column stops the others now, not after they finish
                 pool.shutdown(cancel_futures=True)
                 raise
-    results = {(job.key, job.extra): value for job, value in done.items()}
+    results = {(job.key, job.extra): done[job] for job in jobs}  # in the jobs' order, however they finished
     cols = {k: v for (k, extra), v in results.items() if extra == "ablation" and isinstance(v, Column)}
     col3 = results[("III", "")]
     cols4 = {k: v for (k, extra), v in results.items() if extra == "search" and isinstance(v, Column)}

@@ -223,9 +223,31 @@ def _check_inputs(policy: str | None, model_path: str, config: str, params_file:
     return in_file
 
 
+def _domain_in_use(domain: int) -> bool:
+    """Whether a DDS participant on this machine holds ``domain``: the metatraffic unicast
+    port of its first participant (the RTPS default port mapping, 7410 + 250 x domain) is
+    bound."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind(("0.0.0.0", 7410 + 250 * domain))
+        except OSError:
+            return True
+    return False
+
+
+def free_domain() -> int:
+    """A random ROS_DOMAIN_ID in 1-101 that is neither this process's own nor held by a
+    participant on this machine (any other if all are taken), so that a run's recorder never
+    hears another cell's topics."""
+    own = os.environ.get("ROS_DOMAIN_ID", "0")
+    candidates = [d for d in range(1, 102) if str(d) != own]
+    random.SystemRandom().shuffle(candidates)
+    return next((d for d in candidates if not _domain_in_use(d)), candidates[0])
+
+
 def _child_env(domain_id: int | None) -> dict[str, str]:
     env = dict(os.environ)
-    env["ROS_DOMAIN_ID"] = str(domain_id if domain_id is not None else random.SystemRandom().randint(1, 101))
+    env["ROS_DOMAIN_ID"] = str(domain_id if domain_id is not None else free_domain())
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env.setdefault("AMENT_PREFIX_PATH", sys.prefix)
     env["PYTHONUNBUFFERED"] = "1"

@@ -4,6 +4,7 @@ node fed by a test publisher, verify and replay of the reference bag."""
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -360,6 +361,22 @@ def test_a_crashed_child_stops_the_run_with_the_reason(tmp_path):
     pids = json.loads((tmp_path / "out" / "crash" / "pids.json").read_text())
     assert set(pids) == {"recorder", "scheduler", "cell_sim"} and _gone(pids)
     assert read_with_anyreader(tmp_path / "bags" / "crash") is not None  # the bag was closed properly
+
+
+def test_a_launch_never_picks_a_domain_a_participant_holds(ros_context, monkeypatch):
+    """A run's own random domain is never one where another participant lives (this test's
+    node), nor the launcher's own: its recorder would hear another cell's topics."""
+    from lvws_ros.ros.launcher import _domain_in_use, free_domain
+
+    held = int(os.environ["ROS_DOMAIN_ID"])
+    node = rclpy.create_node("lvws_domain_holder", context=ros_context)
+    try:
+        assert _domain_in_use(held)
+        monkeypatch.setenv("ROS_DOMAIN_ID", str(held % 101 + 1))  # the launcher's own is another one
+        picks = {free_domain() for _ in range(300)}
+        assert held not in picks and held % 101 + 1 not in picks and len(picks) > 50
+    finally:
+        node.destroy_node()
 
 
 @pytest.mark.parametrize(("args", "words"), [
