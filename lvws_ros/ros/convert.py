@@ -190,12 +190,34 @@ class _Reader:
         return tuple(out)
 
 
-_task_fields = operator.attrgetter(  # every field of a Task (a C-level read of each)
-    "status", "capabilities", "payload", "duration", "prerequisites", "assigned_robots", "start_time.sec",
-    "start_time.nanosec", "end_time.sec", "end_time.nanosec", "site_from", "site_to", "requires", "roles")
-_robot_fields = operator.attrgetter(  # every field of a RobotState
-    "kind", "available", "capabilities", "payload", "current_task", "busy_for", "pose.x", "pose.y", "pose.theta",
-    "site", "speed", "traits", "home")
+_TASK_FIELDS = ("status", "capabilities", "payload", "duration", "prerequisites", "assigned_robots", "start_time.sec",
+                "start_time.nanosec", "end_time.sec", "end_time.nanosec", "site_from", "site_to", "requires", "roles")
+_ROBOT_FIELDS = ("kind", "available", "capabilities", "payload", "current_task", "busy_for", "pose.x", "pose.y",
+                 "pose.theta", "site", "speed", "traits", "home")
+_task_fields = operator.attrgetter(*_TASK_FIELDS)  # every field of a Task (a C-level read of each)
+_robot_fields = operator.attrgetter(*_ROBOT_FIELDS)  # every field of a RobotState
+
+
+def _slot_getter(names: tuple[str, ...]) -> Any:
+    """The getter of ``names`` (dotted paths) that reads an rclpy message's slots (``_status``
+    for ``status``): the generated classes keep each field in the slot of its name with an
+    underscore, and their properties return it as it is, so this reads the same values
+    without a Python call per field."""
+    return operator.attrgetter(*(".".join(f"_{part}" for part in name.split(".")) for name in names))
+
+
+_task_slots, _robot_slots = _slot_getter(_TASK_FIELDS), _slot_getter(_ROBOT_FIELDS)
+
+
+def _fields_of(item: Any, by_property: Any, by_slot: Any) -> Any:
+    """``by_slot`` where ``item`` is a generated rclpy message whose slots (its nested
+    messages' too) are its fields' names with an underscore, else ``by_property``."""
+    try:
+        if by_slot(item) == by_property(item):
+            return by_slot
+    except AttributeError:
+        pass
+    return by_property
 
 
 def _task_copy(f: tuple[Any, ...]) -> tuple[Any, ...]:  # the fields with their sequences copied
@@ -231,7 +253,8 @@ class GraphReader(_Reader):
         tasks = msg.tasks
         if not self._plain(tasks, "requires", ("capabilities", "requires")):
             return graph_from_msg(msg)
-        return _graph(msg, self._items(tasks, _task_fields, _task_of_fields, _task_copy))
+        fields = _fields_of(tasks[0], _task_fields, _task_slots)
+        return _graph(msg, self._items(tasks, fields, _task_of_fields, _task_copy))
 
 
 class TeamReader(_Reader):
@@ -241,8 +264,9 @@ class TeamReader(_Reader):
         robots = msg.robots
         if not self._plain(robots, "home", ("capabilities", "traits")):
             return team_from_msg(msg)
+        fields = _fields_of(robots[0], _robot_fields, _robot_slots)
         return TeamSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names),
-                            self._items(robots, _robot_fields, _robot_of_fields, _robot_copy), tuple(msg.trait_names))
+                            self._items(robots, fields, _robot_of_fields, _robot_copy), tuple(msg.trait_names))
 
 
 def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:

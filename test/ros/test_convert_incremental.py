@@ -107,6 +107,22 @@ def test_a_reused_message_changed_in_place_is_read_again() -> None:
     assert reader.read(msg) == graph_from_msg(msg)
 
 
+def test_generated_messages_are_read_through_their_slots_and_other_objects_by_name() -> None:
+    """rclpy's generated messages keep each field in its underscored slot: the readers read
+    those (no Python call per field) and get what the properties give; an object that only
+    has the fields' names (a copy, a bag reader's) is read by name."""
+    import types
+
+    from lvws_ros.ros import convert
+
+    task_msg, robot_msg = graph_to_msg(graph()).tasks[1], team_to_msg(team()).robots[1]
+    assert convert._fields_of(task_msg, convert._task_fields, convert._task_slots) is convert._task_slots
+    assert convert._fields_of(robot_msg, convert._robot_fields, convert._robot_slots) is convert._robot_slots
+    assert convert._task_slots(task_msg) == convert._task_fields(task_msg)
+    plain = types.SimpleNamespace(**{f: getattr(robot_msg, f) for f in robot_msg.get_fields_and_field_types()})
+    assert convert._fields_of(plain, convert._robot_fields, convert._robot_slots) is convert._robot_fields
+
+
 def test_messages_without_the_newer_fields_are_read_whole() -> None:
     plain = TaskGraph()
     plain.tasks = graph_to_msg(graph()).tasks
