@@ -122,6 +122,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot, graph_sites
     from lvws_ros.registry import make_policy
     from lvws_ros.ros import convert
+    from lvws_ros.ros.scheduler_node import collect_after_decision
 
     inst = make_instance(family, n, m, seed)
     planner = policy == "auto-planner"  # auto as the node runs it: its planner in a process beside
@@ -176,6 +177,8 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
         for tid, robots in d.assignments if d else ():
             state.start(inst.task_index[tid], [inst.robot_index[r] for r in robots])
         online.pending.clear()  # the world took them: the next snapshot says so
+        if d is not None:
+            collect_after_decision(d.step + 1)  # as the scheduler node does once it has published
         nxt = state.next_event_time()
         if nxt is None:
             raise RuntimeError(f"{policy}: no progress at t={state.time}")
