@@ -106,6 +106,35 @@ def bench_whole_schedules(seed: int, limit: float) -> None:
                           f"{'yes' if r['valid'] else 'NO'} | {r['peak_mib']:.0f} |", flush=True)
 
 
+def cell_snapshots(state: Any) -> tuple[Any, Any]:
+    """The TeamState and TaskGraph snapshots of a cell in the executor state ``state``, as a
+    world publishes them (with travel, sites as the simulator's: ``sim/world.py``)."""
+    from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot, graph_sites
+
+    inst = state.instance
+    names, tr = tuple(inst.capabilities), inst.travel
+    sites = ((), ()) if tr is None else graph_sites(tr)
+
+    def where(r: int) -> tuple[str, float]:  # a busy robot: where its task leaves it
+        if tr is None or state.robot_site is None:
+            return "", 0.0
+        return tr.sites[int(state.robot_site[r])], tr.robot_speed[r]
+
+    def task_sites(j: int) -> tuple[str, str]:
+        return ("", "") if tr is None else (tr.sites[tr.task_from[j]], tr.sites[tr.task_to[j]])
+
+    free, busy = state.robot_available(), state.busy_remaining()
+    team = TeamSnapshot(state.time, names, tuple(
+        RobotInfo(r.id, "x", bool(free[i]), r.capabilities, r.payload, "", float(busy[i]), (0.0, 0.0, 0.0), *where(i))
+        for i, r in enumerate(inst.robots)))
+    graph = GraphSnapshot(state.time, names, tuple(
+        TaskInfo(t.id, int(state.task_status[j]), t.capabilities, t.payload, t.duration, t.after,
+                 tuple(inst.robots[r].id for r in state.task_team[j]),
+                 None if np.isnan(state.task_start[j]) else float(state.task_start[j]), None, *task_sites(j))
+        for j, t in enumerate(inst.tasks)), *sites)
+    return team, graph
+
+
 def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: bool = True,
                  pace: float = 0.0) -> list[tuple[float, str]]:
     """Seconds per decision of the scheduler node's work (both messages converted to
@@ -119,7 +148,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     if warm_up:
         node_latency(policy, family, 10, 20, seed + 1, warm_up=False)
     from lvws_ros.core.executor import State, TaskStatus
-    from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot, graph_sites
+    from lvws_ros.core.online import OnlineScheduler
     from lvws_ros.registry import make_policy
     from lvws_ros.ros import convert
     from lvws_ros.ros.scheduler_node import collect_after_decision
@@ -133,31 +162,10 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     if process is not None:  # started at the node's configure, so ready before its cell's first state (or the
         process.wait_ready(60.0)  # first decision waits for it: a node started at once with its world)
     state = State.initial(inst)
-    names = tuple(inst.capabilities)
-    tr = inst.travel  # with travel, the snapshots carry sites as the simulator's do (sim/world.py)
-    sites = ((), ()) if tr is None else graph_sites(tr)
-
-    def where(r: int) -> tuple[str, float]:  # a busy robot: where its task leaves it
-        if tr is None or state.robot_site is None:
-            return "", 0.0
-        return tr.sites[int(state.robot_site[r])], tr.robot_speed[r]
-
-    def task_sites(j: int) -> tuple[str, str]:
-        return ("", "") if tr is None else (tr.sites[tr.task_from[j]], tr.sites[tr.task_to[j]])
-
     lat: list[tuple[float, str]] = []
     team_reader, graph_reader = convert.TeamReader(), convert.GraphReader()  # as the node reads its messages
     while not state.done():
-        free = state.robot_available()
-        team = TeamSnapshot(state.time, names, tuple(
-            RobotInfo(r.id, "x", bool(free[i]), r.capabilities, r.payload, "", float(state.busy_remaining()[i]),
-                      (0.0, 0.0, 0.0), *where(i))
-            for i, r in enumerate(inst.robots)))
-        graph = GraphSnapshot(state.time, names, tuple(
-            TaskInfo(t.id, int(state.task_status[j]), t.capabilities, t.payload, t.duration, t.after,
-                     tuple(inst.robots[r].id for r in state.task_team[j]),
-                     None if np.isnan(state.task_start[j]) else float(state.task_start[j]), None, *task_sites(j))
-            for j, t in enumerate(inst.tasks)), *sites)
+        team, graph = cell_snapshots(state)
         team_msg, graph_msg = convert.team_to_msg(team), convert.graph_to_msg(graph)
         t0 = time.perf_counter()
         online.offer_team(team_reader.read(team_msg))

@@ -1,6 +1,6 @@
 """A scheduler node in its own process and a test node that talks to it over DDS: the
 publishers of team and graph, the assignments and diagnostics it receives (as
-"<level>:<message>" strings, and the hardware ids), and a spin that stops when a
+"<level>:<message>" strings, their key-values, and the hardware ids), and a spin that stops when a
 condition holds. With ``namespace`` the scheduler runs in it and the probe talks there."""
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ class Probe:
     got: list[AssignmentArray] = field(default_factory=list)
     diags: list[str] = field(default_factory=list)
     hardware_ids: set[str] = field(default_factory=set)
+    values: list[dict[str, str]] = field(default_factory=list)  # each diagnostics status's key-values
     node: Any = None
     output: str = ""  # the node's stdout and stderr, once it has stopped
 
@@ -62,6 +63,7 @@ def scheduler_probe(ros_context: Any, name: str, ros_args: Sequence[str], namesp
     def on_diagnostics(m: Any) -> None:
         probe.diags.extend(f"{s.level[0]}:{s.message}" for s in m.status)
         probe.hardware_ids.update(s.hardware_id for s in m.status)
+        probe.values.extend({kv.key: kv.value for kv in s.values} for s in m.status)
 
     node.create_subscription(AssignmentArray, ASSIGNMENTS_TOPIC, probe.got.append, reliable)
     node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS_TOPIC,
