@@ -127,6 +127,9 @@ def _publish_until(stop: threading.Event, sent: list[int]) -> None:
     rclpy.init(context=context)
     node = rclpy.create_node("lvws_flood", context=context)
     pub = node.create_publisher(TeamState, "/lvws/team_state", TEAM_QOS)
+    deadline = time.monotonic() + 30.0  # the recorder matched first: discovery can take seconds
+    while pub.get_subscription_count() == 0 and time.monotonic() < deadline and not stop.is_set():
+        time.sleep(0.05)
     k = 0
     while not stop.is_set():
         msg = TeamState(capability_names=["a"], robots=[RobotState(id="r", kind="jackal", capabilities=[1],
