@@ -41,11 +41,11 @@ def spin_once(node: Node, timeout_sec: float, executor: Executor | None = None) 
         node.get_logger().warning(f"a service answer was not sent ({exc}); the client may ask again")
 
 
-def spin(node: Node) -> int:
-    """Spin until shutdown."""
+def spin(node: Node, until: Callable[[], bool] = lambda: False) -> int:
+    """Spin until shutdown, or until ``until()`` holds (looked at every turn)."""
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
-    while node.context.ok():
+    while node.context.ok() and not until():
         spin_once(node, SHUTDOWN_CHECK, executor)
     return 0
 

@@ -11,13 +11,12 @@ message that has arrived is recorded before the next other message (the executor
 one message per subscription per turn, so under load the clock queue would otherwise lag
 the states behind it). Custom types come from lvws_msgs' .msg
 files. SIGINT or SIGTERM at any moment closes the bag: it stays readable with
-everything received until then (the signals are Python's, looked at between two turns of
-the executor; with rclpy's own, which shut the context down from the signal handler while
+everything received until then. The signals are Python's, looked at between two turns of
+the executor (with rclpy's own, which shut the context down from the signal handler while
 the executor may be at work, a recorder under load once died of SIGSEGV as it stopped,
-before it closed the bag). Every
-FLUSH_SECONDS the messages received so far go to disk as a closed MCAP chunk, so even after
-SIGKILL at most the last second is lost:
-``lvws reindex BAG`` rebuilds such a bag's index and metadata.
+before it closed the bag). Every FLUSH_SECONDS the messages received so far go to disk as
+a closed MCAP chunk, so even after SIGKILL at most the last second is lost: ``lvws
+reindex BAG`` rebuilds such a bag's index and metadata.
 """
 
 from __future__ import annotations
@@ -31,7 +30,6 @@ from pathlib import Path
 from typing import Any
 
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
@@ -39,7 +37,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 
 from lvws_ros.ros.bag import flush, open_writer, qos_to_bag, typestore
-from lvws_ros.ros.entry import SHUTDOWN_CHECK, node_main, spin_once
+from lvws_ros.ros.entry import node_main, spin
 from lvws_ros.ros.topics import CLOCK_TOPIC, TOPICS, message_class
 
 RECORDER_DEPTH = 10000  # history per subscription: bursts wait here instead of being overwritten
@@ -151,11 +149,7 @@ def record(node: Recorder) -> int:
     signals: list[int] = []
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda signum, _frame: signals.append(signum))
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    while not signals and node.context.ok():
-        spin_once(node, SHUTDOWN_CHECK, executor)
-    return 0  # node_main destroys the node, which closes the bag, before rclpy's shutdown
+    return spin(node, until=lambda: bool(signals))  # node_main then destroys the node: the bag closes first
 
 
 def main(argv: list[str] | None = None) -> int:
