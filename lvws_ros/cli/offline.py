@@ -19,6 +19,19 @@ from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
 # `lvws --help` stays instant.
 
 
+
+def _print_quick_plans(policy: Any, report: Any, limit: float) -> None:
+    """``auto``'s quick plans as they finished (cheapest first on the cell), and by how much
+    the limit was overrun when none had finished by it (the cheapest is finished anyway)."""
+    quick = getattr(getattr(policy, "planner", None), "quick", {})
+    if quick:
+        print("auto: quick plans that finished: " + ", ".join(f"{name} {makespan:g} in {seconds:.2f} s"
+                                                              for name, (makespan, seconds) in quick.items()),
+              file=sys.stderr)
+    if report.overrun > 0:
+        print(f"auto: no quick plan had finished by the limit, so {report.fallback}'s (the cheapest on this cell) "
+              f"was finished: overran the time limit of {limit:g} s by {report.overrun:.2f} s", file=sys.stderr)
+
 def _instances(paths: Sequence[str]) -> list[Instance]:
     files: list[Path] = []
     for p in map(Path, paths):
@@ -97,8 +110,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(f"auto: planned {report.seconds:.1f} s ({report.rounds} improvement rounds): quick plan "
               f"{quick:g}, final plan {report.makespan:g} by {report.source}, improved by CP-SAT "
               f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)} and by "
-              f"sampling {improved.get('sample', 0)} times; "
+              f"sampling {improved.get('sample', 0) + improved.get('grp-sample', 0)} times; "
               f"{'proven optimal' if report.proven else 'not proven optimal'}; seed {args.seed}", file=sys.stderr)
+        _print_quick_plans(policy, report, args.time_limit)
     elif args.policy == "auto":
         improved = getattr(policy, "improved", {})
         print(f"auto: quick plan {getattr(policy, 'quick_makespan', float('nan')):g}, improved by a quick plan "

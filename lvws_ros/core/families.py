@@ -38,6 +38,15 @@ and measured only there says little about a user's cell, so we draw from familie
   robot mobile at one of the depot speeds, starting at a random station; half the robots
   have their home at the first station (a dock), the others where they start; 20 % of the
   tasks are transports.
+* ``warehouse`` — held out, traits with travel and ``"objective": "return"``: orders are
+  chains pick -> carry -> kit -> inspect on a grid of stations 6 m apart (aisles: Manhattan
+  distances). Picks and kitting need an ``arm`` (arms are fixed, one to three at each pick
+  and kit station); a carry takes a tote from its pick station to a kit station and needs a
+  summed ``lift`` of 1-4 (AMRs lift 1 or 2, so heavy totes take two or three); inspection,
+  at one of the inspection stations, needs a ``scanner`` (scanners lift 0.5 too). AMRs
+  (0.8-1.6 m/s) and scanners (0.5-1 m/s) start at and return to a dock. 15 % of the orders
+  kit only after an earlier order's kit. 30 % arms, 50 % AMRs, 20 % scanners by default;
+  a pick or kit station per three arms, an inspection station per four kit stations.
 * ``traits-roles`` — held out, traits: roles on every task (the instance's ``roles``),
   specialists (each robot 1..2 of L = 3..8 traits), a summed ``payload`` trait in float
   kilograms beside them, in-trees or layers, log-normal float durations around 20 s.
@@ -85,6 +94,9 @@ FAMILIES = {
     "traits-return": Family("traits-return", 17, False, "additive traits with travel, homes and the objective "
                             "'return': 4-7 stations in 10 m x 5 m, half the robots docked at one station",
                             travel=True, traits=True),
+    "warehouse": Family("warehouse", 18, True, "held out, traits with travel and the objective 'return': orders "
+                        "pick -> carry -> kit -> inspect on a station grid, fixed arms, AMRs lifting together, "
+                        "scanners", travel=True, traits=True),
     "traits-roles": Family("traits-roles", 16, True, "held out, traits: roles everywhere, specialists, a float "
                            "payload trait, in-trees or layers, float durations", traits=True),
 }
@@ -338,6 +350,90 @@ def trait_return_instance(rng: np.random.Generator, name: str, num_robots: int |
     return replace(inst, travel=travel, objective="return")
 
 
+WAREHOUSE_SPACING = 6.0  # m between neighbouring stations of the warehouse grid
+WAREHOUSE_STAGES = ("pick", "carry", "kit", "inspect")
+
+
+def _warehouse_fleet(rng: np.random.Generator, n: int) -> tuple[int, int, np.ndarray]:
+    """How many arms, AMRs and scanners (at least 2, 1, 1), and each arm's station among
+    the arm stations (every station with at least one arm)."""
+    arms = max(2, round(0.3 * n))
+    scanners = max(1, round(0.2 * n))
+    amrs = n - arms - scanners
+    if amrs < 1:
+        raise ValueError(f"warehouse instances have at least 4 robots, not {n}")
+    stations = max(2, arms // 3)
+    at = np.concatenate([np.arange(stations), rng.integers(stations, size=arms - stations)])
+    return arms, amrs, at
+
+
+def warehouse_instance(rng: np.random.Generator, name: str, num_robots: int | None = None,
+                       num_tasks: int | None = None) -> Instance:
+    """One instance of the held-out warehouse family (module docstring): ``num_tasks``
+    rounded up to whole orders of four tasks."""
+    n = num_robots or int(rng.integers(8, 25))
+    orders = -(-(num_tasks or int(rng.integers(12, 41))) // 4)
+    arms, amrs, arm_at = _warehouse_fleet(rng, n)
+    arm_stations = int(arm_at.max()) + 1
+    kits = max(1, arm_stations // 3)  # the last ``kits`` arm stations kit, the others pick
+    picks = arm_stations - kits
+    inspections = max(1, kits // 4)
+    stations = [f"pick{i}" for i in range(picks)] + [f"kit{i}" for i in range(kits)] + \
+        [f"inspect{i}" for i in range(inspections)] + ["dock"]
+    cols = int(np.ceil(np.sqrt(len(stations))))
+    cells = rng.permutation(cols * cols)[: len(stations)]
+    xy = np.stack([cells % cols, cells // cols], axis=1).astype(float) * WAREHOUSE_SPACING
+    manhattan = np.abs(xy[:, None, :] - xy[None, :, :]).sum(axis=-1)
+    distances = {a: {b: float(manhattan[i, j]) for j, b in enumerate(stations) if j != i}
+                 for i, a in enumerate(stations)}
+    robots: list[Robot] = []
+    robot_sites: list[tuple[str, str, float | None]] = []
+    for i in range(n):
+        if i < arms:
+            robots.append(Robot(f"arm{i}", (), 0.0, traits=(("arm", 1.0),)))
+            robot_sites.append((f"arm{i}", stations[int(arm_at[i])], None))
+        elif i < arms + amrs:
+            lift = float(rng.choice((1.0, 2.0), p=(0.7, 0.3)))
+            robots.append(Robot(f"amr{i}", (), 0.0, traits=(("lift", lift),)))
+            robot_sites.append((f"amr{i}", "dock", float(rng.choice((0.8, 1.0, 1.25, 1.6)))))
+        else:
+            robots.append(Robot(f"scan{i}", (), 0.0, traits=(("scanner", 1.0), ("lift", 0.5))))
+            robot_sites.append((f"scan{i}", "dock", float(rng.choice((0.5, 0.8, 1.0)))))
+    tasks, sites = _warehouse_orders(rng, orders, stations, (picks, kits, inspections), manhattan)
+    travel = build_travel({s: [float(x), float(y)] for s, (x, y) in zip(stations, xy, strict=True)}, distances,
+                          robot_sites, sites)
+    return Instance(name, (), tuple(robots), tuple(tasks), travel=travel, traits=("arm", "lift", "scanner"),
+                    objective="return")
+
+
+def _warehouse_orders(rng: np.random.Generator, orders: int, stations: list[str], counts: tuple[int, int, int],
+                      manhattan: np.ndarray) -> tuple[list[Task], list[tuple[str, str, str]]]:
+    """The orders' tasks (pick -> carry -> kit -> inspect, some kits after an earlier
+    order's) and their sites; ``counts``: the pick, kit and inspection stations, listed in
+    that order in ``stations``."""
+    picks, kits, inspections = counts
+    tasks: list[Task] = []
+    sites: list[tuple[str, str, str]] = []
+    for o in range(orders):
+        pick, kit = int(rng.integers(picks)), picks + int(rng.integers(kits))
+        inspect = picks + kits + int(rng.integers(inspections))
+        lift = float(rng.choice((1.0, 1.5, 2.0, 3.0, 4.0), p=(0.45, 0.15, 0.2, 0.12, 0.08)))
+        carry = float(manhattan[pick, kit]) + round(float(rng.uniform(2.0, 6.0)), 1)
+        stage = [("pick", stations[pick], stations[pick], "arm", 1.0, round(float(rng.uniform(5.0, 15.0)), 1)),
+                 ("carry", stations[pick], stations[kit], "lift", lift, carry),
+                 ("kit", stations[kit], stations[kit], "arm", 1.0, round(float(rng.uniform(8.0, 20.0)), 1)),
+                 ("inspect", stations[inspect], stations[inspect], "scanner", 1.0,
+                  round(float(rng.uniform(3.0, 8.0)), 1))]
+        earlier = f"o{int(rng.integers(max(0, o - 10), o))}-kit" if o and rng.random() < 0.15 else None
+        for s, (kind, a, b, trait, amount, duration) in enumerate(stage):
+            after: tuple[str, ...] = (f"o{o}-{stage[s - 1][0]}",) if s else ()
+            if kind == "kit" and earlier is not None:
+                after += (earlier,)
+            tasks.append(Task(f"o{o}-{kind}", (), 0.0, duration, after, requires=((trait, amount),)))
+            sites.append((f"o{o}-{kind}", a, b))
+    return tasks, sites
+
+
 def _straight_line(stations: list[str], xy: np.ndarray) -> dict[str, dict[str, float]]:
     """Distances between stations: the straight line rounded up to 0.5 m."""
     line = np.ceil(2 * np.sqrt(((xy[:, None, :] - xy[None, :, :]) ** 2).sum(axis=-1))) / 2
@@ -355,6 +451,8 @@ def family_instance(key: str, index: int, seed: int, num_robots: int | None = No
         inst = assembly_instance(rng, "tmp", num_robots or 6, num_tasks or 18)
     elif key == "depot":
         inst = depot_instance(rng, "tmp", num_robots, num_tasks)
+    elif key == "warehouse":
+        inst = warehouse_instance(rng, "tmp", num_robots, num_tasks)
     elif key == "traits-return":
         inst = trait_return_instance(rng, "tmp", num_robots, num_tasks)
     elif fam.traits:

@@ -62,7 +62,7 @@ class Travel:
         needs to reach task ``tasks[j]`` alone; inf when it can never do it (:meth:`time`,
         :meth:`can_do`)."""
         r, a, t = (np.asarray(x, dtype=np.int64).reshape(-1) for x in (robots, at, tasks))
-        speeds, meets, ends = self._arrays
+        speeds, meets, ends = self.arrays
         speed = speeds[r][:, None]
         meet = meets[t]
         moves = meet != ends[t]
@@ -72,7 +72,7 @@ class Travel:
         return np.asarray(out, dtype=np.float64)
 
     @cached_property
-    def _arrays(self) -> tuple[FloatArray, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    def arrays(self) -> tuple[FloatArray, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
         """robot_speed, task_from and task_to as (read-only) arrays, made once."""
         out = (np.array(self.robot_speed, dtype=np.float64), np.array(self.task_from, dtype=np.int64),
                np.array(self.task_to, dtype=np.int64))

@@ -49,7 +49,16 @@ from typing import Any
 import numpy as np
 
 from lvws_ros.core.bounds import gap, lower_bounds
-from lvws_ros.core.executor import Policy, SimulationResult, State, schedule_from_state, simulate
+from lvws_ros.core.executor import (
+    Decision,
+    Policy,
+    SimulationResult,
+    State,
+    TaskStatus,
+    advance,
+    schedule_from_state,
+    simulate,
+)
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Schedule
 from lvws_ros.core.subteams import TOLERANCE
@@ -71,6 +80,11 @@ PATIENCE_LARGE = 40  # the same for a rest too large for CP-SAT's whole model
 TEMPERATURE_TASKS = 20  # sampling_temperature: the default temperature up to this many tasks to do
 AHEAD_NOISE = 0.5  # "departure": "each": noise on the list schedules' keys, in mean task durations (not tuned)
 AHEAD_SAMPLES = 20  # list schedules of one such round when rounds are counted
+GRP_NOISE = 0.5  # randomized GRP rounds: noise on the critical-path keys, in mean task durations (not tuned)
+GRP_SAMPLES = 4  # randomized GRP schedules of one round when rounds are counted
+PROBE_DECISIONS = 3  # decision steps of a quick plan timed to estimate what it costs on the cell
+PROBE_SECONDS = 0.5  # a probe stops after this long even with fewer decision steps
+PROJECT_AFTER = 1.0  # seconds into a quick plan before its finish is projected from its progress
 
 __all__ = ["EXACT_TASKS", "Plan", "PlanReport", "Planner", "sampling_temperature"]
 
@@ -81,6 +95,27 @@ def sampling_temperature(todo: int, base: float = DEFAULT_TEMPERATURE) -> float:
     as 1 / tasks (the noise of one decision adds up over the decisions of a whole schedule:
     at fleet scale the default temperature samples only schedules worse than LVWS's own)."""
     return base * min(1.0, TEMPERATURE_TASKS / max(1, todo))
+
+
+class Projected(Until):
+    """``policy`` within ``deadline`` (:class:`~lvws_ros.learning.policies.Until`) that also
+    gives up (OutOfTime) once, PROJECT_AFTER seconds in, the finish its progress projects
+    (seconds so far over the share of the tasks started) is past the deadline: a quick plan
+    far too slow for the time left does not take all of it. A run's first steps start the
+    most tasks, so the projection errs early."""
+
+    def __init__(self, policy: Policy, deadline: float, state: State) -> None:
+        super().__init__(policy, deadline)
+        self.began = time.perf_counter()
+        self.todo = max(1, int((state.task_status == TaskStatus.QUEUED).sum()))
+
+    def decide(self, state: State) -> Decision:
+        spent = time.perf_counter() - self.began
+        if spent > PROJECT_AFTER:
+            started = self.todo - int((state.task_status == TaskStatus.QUEUED).sum())
+            if started <= 0 or self.began + spent * self.todo / started > self.deadline:
+                raise OutOfTime
+        return super().decide(state)
 
 
 @dataclass
@@ -103,6 +138,8 @@ class PlanReport:
     seconds: float  # since the planner started from this cell
     rounds: int  # improvement rounds so far
     improved: dict[str, int] = field(default_factory=dict)  # times each improver shortened the plan
+    overrun: float = 0.0  # seconds past the deadline taken to finish the first quick plan (none had finished)
+    fallback: str = ""  # that quick plan's name, when it overran
 
 
 class Planner:
@@ -136,6 +173,8 @@ class Planner:
         self.counted = False  # rounds counted, not timed (deterministic)
         self.quick_makespan = math.nan  # the best quick plan's, from the latest state they were made from
         self.quick: dict[str, tuple[float, float]] = {}  # each quick plan's (makespan, seconds), latest made
+        self.quick_cost: dict[str, float] = {}  # each quick plan's probed seconds per task to do, on this cell
+        self.overrun, self.fallback = 0.0, ""  # the first quick plan finished past the deadline (by, which)
         self.started = time.perf_counter()
         self._instance: Instance | None = None
         self._quick: list[tuple[str, Callable[[], Policy]]] = [
@@ -178,7 +217,8 @@ class Planner:
         bound = makespan if self.proven else self.bound
         return PlanReport(makespan, bound, gap(makespan, bound) if self.plan is not None else math.nan,
                           self.plan.source if self.plan is not None else "", self.proven,
-                          time.perf_counter() - self.started, self.rounds, dict(self.improved))
+                          time.perf_counter() - self.started, self.rounds, dict(self.improved),
+                          self.overrun, self.fallback)
 
     # -- from a state ----------------------------------------------------------------------
 
@@ -196,6 +236,7 @@ class Planner:
             self.base_bound = lower_bounds(state.instance).best
             self.lns_window = None
             self._pooled = None
+            self.quick_cost = {}
         self.plan = None
         if old is not None:
             try:
@@ -209,37 +250,87 @@ class Planner:
             self.exact_overran = self.exact_shortened = False
         if due and quick:
             self.quick_plans(state, deadline)
-        if self.plan is None:  # nothing yet (or not even a quick plan fitted): GRP's, however long it takes
-            name, make = self._quick[0]
-            t0 = time.perf_counter()
-            res = self._ahead(state, simulate(state.instance, make(), state=state))
-            self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
-            self.offer(res, state, name)
+        if self.plan is None:  # nothing yet: the cheapest quick plan, however long it takes
+            self.quick_plans(state, -math.inf)
         return due
 
-    def quick_plans(self, state: State, deadline: float | None) -> None:
-        """The quick plans from ``state``, each within ``deadline`` (a perf_counter time)."""
+    def quick_order(self, state: State) -> list[tuple[str, Callable[[], Policy]]]:
+        """The quick plans, the cheapest on this cell first: each one's cost per task to do,
+        probed once per cell (:meth:`_probe`: its first decision steps from ``state``, timed)
+        and kept in :attr:`quick_cost`. Ties keep the listed order."""
         for name, make in self._quick:
-            if deadline is not None and time.perf_counter() >= deadline:
-                return
-            if self.plan is not None and self.plan.state is state and self.plan.source == name:
-                continue  # made already
+            if name not in self.quick_cost:
+                self.quick_cost[name] = self._probe(state, make)
+        return sorted(self._quick, key=lambda q: self.quick_cost[q[0]])
+
+    def _probe(self, state: State, make: Callable[[], Policy]) -> float:
+        """Seconds per task to do of ``make()``'s run from ``state``: the median of its
+        first PROBE_DECISIONS decision steps (at most PROBE_SECONDS), timed, taken as the
+        cost of each of the steps to come, about one per task to do (a run's first steps
+        start the most tasks, so seconds per task started would flatter a policy whose
+        every step costs the same, like a network's pass over the whole cell)."""
+        policy = make()
+        policy.reset(state.instance)
+        probe: State | None = state.copy()
+        steps: list[float] = []
+        end = time.perf_counter() + PROBE_SECONDS
+        while probe is not None and len(steps) < PROBE_DECISIONS and probe.tasks_to_do() \
+                and time.perf_counter() < end:
             t0 = time.perf_counter()
-            policy = make()
             try:
-                res = simulate(state.instance, policy if deadline is None else Until(policy, deadline), state=state)
-            except (OutOfTime, PolicyError):
-                continue
-            if name == "lvws":
-                self.lvws_seconds = time.perf_counter() - t0
-                self.round_cost.add(len(state.tasks_to_do()), 1, self.lvws_seconds)
-            res = self._ahead(state, res)
-            self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
-            self.offer(res, state, name)
+                decision = policy.decide(probe)
+            except PolicyError:
+                return math.inf
+            steps.append(time.perf_counter() - t0)
+            probe = advance(probe, decision)
+        return float(np.median(steps)) if steps else 0.0
+
+    def quick_plans(self, state: State, deadline: float | None) -> None:
+        """The quick plans from ``state``, cheapest first (:meth:`quick_order`), each within
+        ``deadline`` (a perf_counter time; None: all of them, in the listed order), given up
+        once its progress projects a finish past it (:class:`Projected`). Until one has
+        finished from ``state``, the cheapest runs whatever the deadline: the time it takes
+        past it is :attr:`overrun`. Made, they are offered in the listed order (ties: the
+        first listed)."""
+        order = self._quick if deadline is None or self.counted else self.quick_order(state)
+        made: dict[str, SimulationResult] = {}
+        for name, make in order:
+            planned = self.plan is not None and self.plan.state is state
+            if planned and self.plan is not None and self.plan.source == name:
+                continue  # made already
+            have = planned or bool(made)
+            if have and deadline is not None and deadline <= time.perf_counter():
+                break
+            res = self._quick_plan(state, name, make, deadline if have else None)
+            if res is not None:
+                made[name] = res
+                if not have and deadline is not None:
+                    self.overrun = max(0.0, time.perf_counter() - deadline)
+                    self.fallback = name if self.overrun > 0 else ""
+        for name, _ in self._quick:
+            if name in made:
+                self.offer(made[name], state, name)
         if state.instance.departure == "each":
             self._ahead_plans(state, deadline)
         if self.plan is not None:
             self.quick_makespan = self.plan.makespan
+
+    def _quick_plan(self, state: State, name: str, make: Callable[[], Policy],
+                    deadline: float | None) -> SimulationResult | None:
+        """One quick plan from ``state`` (None: it would not finish by ``deadline``)."""
+        t0 = time.perf_counter()
+        policy = make()
+        try:
+            res = simulate(state.instance, policy if deadline is None else Projected(policy, deadline, state),
+                           state=state)
+        except (OutOfTime, PolicyError):
+            return None
+        if name == "lvws":
+            self.lvws_seconds = time.perf_counter() - t0
+            self.round_cost.add(len(state.tasks_to_do()), 1, self.lvws_seconds)
+        res = self._ahead(state, res)
+        self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
+        return res
 
     def _ahead_plans(self, state: State, deadline: float | None) -> None:
         """With ``"departure": "each"``, the list schedules of robots that set out on their
@@ -292,6 +383,8 @@ class Planner:
             shorter = self._sample_ahead(state, end)
         elif self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
             shorter = self._sample(state, todo, end)
+        elif self.rounds % SAMPLE_EVERY == 0 and not self._whole(todo):
+            shorter = self._sample_grp(state, end)
         elif self._whole(todo) and not self.exact_closed and (self.exact_rounds <= self.lns_rounds or self.exact_shortened):
             shorter = self._exact(state, end, deadline)
         else:  # a larger rest, or every other round on a small one (CP-SAT's whole model may find nothing there)
@@ -399,6 +492,34 @@ class Planner:
         if best is None or best.makespan >= self.plan.makespan - TOLERANCE:
             return False
         return self.offer_schedule(best, "sample")
+
+    def _sample_grp(self, state: State, end: float) -> bool:
+        """A round of randomized GRP list schedules (critical-path keys with GRP_NOISE
+        noise, a new seed each) until ``end`` (GRP_SAMPLES when counted): the improver of a
+        rest too large for CP-SAT's whole model where LVWS's own run does not fit a slice;
+        the shortest offered."""
+        assert self.plan is not None
+        best: SimulationResult | None = None
+        made = 0
+        if not self.counted and self.quick.get("grp-critical-path", (0.0, 0.0))[1] > end - time.perf_counter():
+            return False  # one run does not fit in the round
+        while (time.perf_counter() < end) if not self.counted else made < GRP_SAMPLES:
+            policy = GreedyPayloadPolicy(seed=int(self.rng.integers(2**31)), priority="critical-path",
+                                         noise=GRP_NOISE)
+            made += 1
+            try:
+                res = simulate(state.instance, policy if self.counted else Until(policy, end), state=state)
+            except (OutOfTime, PolicyError):
+                break
+            res = self._ahead(state, res)
+            if best is None or res.schedule.makespan < best.schedule.makespan:
+                best = res
+        if best is None or best.schedule.makespan >= self.plan.makespan - TOLERANCE:
+            return False
+        if self.offer(best, state, "grp-sample"):
+            self.improved["grp-sample"] = self.improved.get("grp-sample", 0) + 1
+            return True
+        return False
 
     def _sample(self, state: State, todo: int, end: float) -> bool:
         assert self.plan is not None

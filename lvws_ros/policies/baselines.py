@@ -35,6 +35,51 @@ from lvws_ros.core.subteams import AmountArray, FloatArray, covered, covers_alon
 from lvws_ros.errors import PolicyError
 
 
+class _ReachableSums:
+    """What the free robots that can reach each of some tasks add up to (all the free robots
+    without travel), kept as robots leave: a task they do not add up to (Eqs. 10-11 on the
+    sums) has no covering subteam among them, so it is skipped at once. A mobile robot
+    reaches every task, a fixed one only the tasks at its site that do not move it: the sums
+    are the mobile robots' plus those of the fixed robots at each task's site, O((robots +
+    tasks) K) each time robots leave."""
+
+    def __init__(self, state: State, free: npt.NDArray[np.int64], tasks: npt.NDArray[np.int64]) -> None:
+        inst, tr = state.instance, state.instance.travel
+        self.need, self.need_payload = inst.task_needs[tasks], inst.task_payload[tasks]
+        self.amounts, self.payloads = inst.robot_amounts[free], inst.robot_payload[free]
+        self.mobile = np.ones(len(free), dtype=bool)
+        self.site = np.zeros(len(free), dtype=np.int64)
+        self.meet: npt.NDArray[np.int64] | None = None  # each task's site; -1: a transport (no fixed robot)
+        self.sites = 0
+        if tr is not None and state.robot_site is not None:
+            speeds, meets, ends = tr.arrays
+            self.mobile, self.site = speeds[free] > 0, state.robot_site[free]
+            self.meet, self.sites = np.where(meets[tasks] == ends[tasks], meets[tasks], len(tr.sites)), len(tr.sites)
+        self.ok = self._covered()
+
+    def _covered(self) -> npt.NDArray[np.bool_]:
+        amounts, payloads = self.amounts[self.mobile], self.payloads[self.mobile]
+        total, pay = amounts.sum(axis=0)[None, :], np.atleast_1d(payloads.sum())
+        if self.meet is not None:
+            fixed = ~self.mobile
+            by_site = np.zeros((self.sites + 1, self.amounts.shape[1]))  # the last row: no site (transports)
+            pay_site = np.zeros(self.sites + 1)
+            np.add.at(by_site, self.site[fixed], self.amounts[fixed])
+            np.add.at(pay_site, self.site[fixed], self.payloads[fixed])
+            total, pay = total + by_site[self.meet], pay + pay_site[self.meet]
+        return covered(total, pay, self.need, self.need_payload)
+
+    def possible(self, k: int) -> bool:
+        """Whether the ``k``-th task may be covered by the free robots left."""
+        return bool(self.ok[k])
+
+    def leave(self, rows: list[int]) -> None:
+        """The free robots at ``rows`` (of the current free ones) are given a task."""
+        self.amounts, self.payloads = np.delete(self.amounts, rows, axis=0), np.delete(self.payloads, rows)
+        self.mobile, self.site = np.delete(self.mobile, rows), np.delete(self.site, rows)
+        self.ok = self._covered()
+
+
 class _SequentialPolicy:
     """Takes ready tasks one by one and gives each a subteam of the free robots chosen
     by ``pick`` (None: no subteam of them covers the task)."""
@@ -56,9 +101,10 @@ class _SequentialPolicy:
              need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
         raise NotImplementedError
 
-    def arrivals(self, state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
-        """Seconds each free robot needs to reach ``task`` (zeros without travel)."""
-        return state.arrivals(free, [task])[:, 0]
+    def arrivals(self, state: State, free: npt.NDArray[np.int64], tasks: npt.NDArray[np.int64]) -> FloatArray:
+        """(len(free), len(tasks)): seconds each free robot needs to reach each task (zeros
+        without travel)."""
+        return state.arrivals(free, tasks)
 
     def pick_reachable(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
                        arrival: FloatArray, roles: bool = False) -> tuple[int, ...] | None:
@@ -78,28 +124,25 @@ class _SequentialPolicy:
         free = np.array(robots, dtype=np.int64)
         order = np.array(self.order(inst, tasks), dtype=np.int64)
         out = []
-        # tasks the free robots together can cover, all at once (a subset covers no more)
-        possible = covered(inst.robot_amounts[free].sum(axis=0), inst.robot_payload[free].sum(),
-                           inst.task_needs[order], inst.task_payload[order])
-        for k, task in enumerate(order):
+        sums = _ReachableSums(state, free, order)
+        for k in np.flatnonzero(sums.ok):  # a task the free robots cannot add up to stays so as they leave
             if not len(free):
                 break
-            if not possible[k]:
+            if not sums.possible(int(k)):
                 continue
+            task = int(order[k])
             if inst.travel is None:  # the paper's choice, untouched
                 team = self.pick(inst.robot_amounts[free], inst.robot_payload[free], inst.task_needs[task],
                                  inst.tasks[task].payload, bool(inst.task_roles[task]))
             else:
                 team = self.pick_reachable(inst.robot_amounts[free], inst.robot_payload[free], inst.task_needs[task],
-                                           inst.tasks[task].payload, self.arrivals(state, free, int(task)),
+                                           inst.tasks[task].payload, self.arrivals(state, free, order[k:k + 1])[:, 0],
                                            bool(inst.task_roles[task]))
             if team is None:
                 continue
-            out.append((int(task), tuple(int(free[i]) for i in team)))
+            out.append((task, tuple(int(free[i]) for i in team)))
+            sums.leave(list(team))
             free = np.delete(free, list(team))
-            rest = order[k + 1:]
-            possible[k + 1:] = covered(inst.robot_amounts[free].sum(axis=0), inst.robot_payload[free].sum(),
-                                       inst.task_needs[rest], inst.task_payload[rest])
         return Decision(tuple(out), tuple(free.tolist()))
 
 
@@ -109,26 +152,36 @@ PRIORITIES = ("index", "critical-path")  # the order in which GRP takes the read
 class GreedyPayloadPolicy(_SequentialPolicy):
     name = "grp"
 
-    def __init__(self, seed: int = 0, priority: str = "index") -> None:
+    def __init__(self, seed: int = 0, priority: str = "index", noise: float = 0.0) -> None:
         if priority not in PRIORITIES:
             raise PolicyError(f"grp: unknown priority {priority!r}; one of {', '.join(PRIORITIES)}")
+        if not noise >= 0:
+            raise PolicyError(f"grp: the noise must be >= 0, got {noise}")
         super().__init__(seed)
-        self.priority = priority
+        self.priority, self.noise = priority, noise
         self._ways_home: tuple[Instance | None, FloatArray | None] = (None, None)
 
     def order(self, inst: Instance, ready: list[int]) -> list[int]:
+        """The ready tasks in the priority's order; with ``noise``, the critical-path keys
+        each perturbed by Gaussian noise of ``noise`` mean task durations (randomized list
+        schedules, drawn from the policy's seeded generator)."""
         if self.priority == "index":
             return ready
-        tail = inst.critical_tail
-        return sorted(ready, key=lambda j: (-float(tail[j]), j))
+        if not ready:
+            return ready
+        keys = inst.critical_tail[ready]
+        if self.noise > 0:
+            keys = keys + self.noise * float(inst.durations.mean()) * self.rng.standard_normal(len(ready))
+        tasks = np.array(ready)
+        return tasks[np.lexsort((tasks, -keys))].tolist()  # the longest first (ties: lower index)
 
-    def arrivals(self, state: State, free: npt.NDArray[np.int64], task: int) -> FloatArray:
-        """Seconds each free robot needs to reach ``task``; with ``"objective": "return"``,
+    def arrivals(self, state: State, free: npt.NDArray[np.int64], tasks: npt.NDArray[np.int64]) -> FloatArray:
+        """Seconds each free robot needs to reach each task; with ``"objective": "return"``,
         in the last wave (every task not started is ready, so a robot's task now may be
         its last), plus its own way home from where the task ends: robots are ranked by
         when they could be back (a heuristic: it ignores the members' latest arrival and
         the tasks still to come)."""
-        out = super().arrivals(state, free, task)
+        out = super().arrivals(state, free, tasks)
         inst = state.instance
         if inst.objective != "return" or inst.travel is None or (state.task_status == TaskStatus.QUEUED).any():
             return out
@@ -136,13 +189,24 @@ class GreedyPayloadPolicy(_SequentialPolicy):
             self._ways_home = (inst, inst.travel.ways_home())
         ways = self._ways_home[1]
         assert ways is not None
-        return out + ways[free, task]
+        return out + ways[np.ix_(free, tasks)]
 
     def pick_reachable(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
                        arrival: FloatArray, roles: bool = False) -> tuple[int, ...] | None:
         """The lightest subteam among the robots that are there soonest: robots arriving
-        within each distinct arrival time in turn, the first that can cover wins."""
-        for limit in np.unique(arrival[np.isfinite(arrival)]):
+        within each distinct arrival time in turn, the first that can cover wins. The
+        arrival times at which the robots there do not even add up to the needs (Eqs.
+        10-11 on their sums, a necessary condition) are skipped at once."""
+        limits = np.unique(arrival[np.isfinite(arrival)])
+        if not len(limits):
+            return None
+        by_arrival = np.argsort(arrival, kind="stable")
+        there = np.searchsorted(arrival[by_arrival], limits, side="right") - 1  # the last robot within each limit
+        enough = covered(np.cumsum(caps[by_arrival], axis=0)[there], np.cumsum(payloads[by_arrival])[there],
+                         need_caps, need_payload)
+        if not enough.any():
+            return None
+        for limit in limits[int(np.argmax(enough)):]:
             near = np.flatnonzero(arrival <= limit)
             team = self.pick(caps[near], payloads[near], need_caps, need_payload, roles)
             if team is not None:

@@ -140,3 +140,47 @@ def test_grp_in_critical_path_order_starts_the_longest_chain_first():
     assert path.makespan == pytest.approx(11.0)
     with pytest.raises(PolicyError, match="priority"):
         GreedyPayloadPolicy(priority="shortest")
+
+
+def _pick_reachable_by_every_limit(pol, caps, payloads, need_caps, need_payload, arrival, roles):
+    """GRP's choice among the robots there soonest as first written: every distinct arrival
+    time in turn, the first whose robots cover wins."""
+    for limit in np.unique(arrival[np.isfinite(arrival)]):
+        near = np.flatnonzero(arrival <= limit)
+        team = pol.pick(caps[near], payloads[near], need_caps, need_payload, roles)
+        if team is not None:
+            return tuple(int(near[i]) for i in team)
+    return None
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 10**6), st.integers(1, 12), st.booleans())
+def test_grp_skipping_the_arrivals_that_cannot_add_up_chooses_as_every_arrival_in_turn(seed, n, roles):
+    from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(1, 4))
+    caps = rng.choice([0.0, 0.5, 1.0, 2.0], size=(n, k))
+    payloads = rng.choice([0.0, 1.0, 2.5], size=n)
+    need = rng.choice([0.0, 1.0, 2.0, 3.0], size=k)
+    arrival = np.where(rng.random(n) < 0.2, np.inf, rng.choice([0.0, 1.0, 2.0, 3.5, 4.0], size=n))
+    pol = GreedyPayloadPolicy()
+    pol.traits_from = 0 if rng.random() < 0.5 else None
+    need_payload = float(rng.choice([0.0, 2.0]))
+    assert pol.pick_reachable(caps, payloads, need, need_payload, arrival, roles) == \
+        _pick_reachable_by_every_limit(pol, caps, payloads, need, need_payload, arrival, roles)
+
+
+def test_randomized_grp_is_seeded_and_valid_and_without_noise_is_grp():
+    from lvws_ros.core.families import family_instance
+    from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+    inst = family_instance("warehouse", 1, 0, num_robots=20, num_tasks=48)
+    plain = simulate(inst, GreedyPayloadPolicy(priority="critical-path")).schedule
+    assert simulate(inst, GreedyPayloadPolicy(priority="critical-path", noise=0.0, seed=5)).schedule.assignments == \
+        plain.assignments
+    runs = [simulate(inst, GreedyPayloadPolicy(priority="critical-path", noise=0.5, seed=s)).schedule for s in (1, 1, 2)]
+    assert runs[0].assignments == runs[1].assignments
+    assert all(check_schedule(inst, s) == [] for s in runs)
+    with pytest.raises(PolicyError, match="noise"):
+        GreedyPayloadPolicy(noise=-1.0)
