@@ -36,6 +36,7 @@ import yaml
 
 from lvws_ros.errors import ConfigError, LaunchError, PolicyError
 from lvws_ros.ros.topics import CLOCK_REMAP
+from lvws_ros.rosbase.names import check_namespace
 
 PR_SET_PDEATHSIG = 1
 DASHBOARD_TOKEN_ENV = "LVWS_DASHBOARD_TOKEN"  # the dashboard's token, given by the environment (never printed)
@@ -187,21 +188,6 @@ def _param(value: object) -> str:
     return str(value)
 
 
-def check_namespace(namespace: str) -> str:
-    """``namespace`` as a fully qualified ROS namespace ('' stays ''): ConfigError if invalid."""
-    if not namespace:
-        return ""
-    from rclpy.exceptions import InvalidNamespaceException
-    from rclpy.validate_namespace import validate_namespace
-
-    ns = namespace if namespace.startswith("/") else f"/{namespace}"
-    try:
-        validate_namespace(ns)
-    except InvalidNamespaceException as exc:
-        raise ConfigError(f"--namespace {namespace!r}: not a valid ROS namespace ({exc})") from None
-    return ns
-
-
 def _check_inputs(policy: str | None, model_path: str, config: str, params_file: str | None,
                   events: str | None = None, namespace: str = "") -> dict[str, Any]:
     """Every input checked before anything starts; the parameter file's scheduler values."""
@@ -325,7 +311,7 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     lvws-instance/1 file; default: the simulator's cell written as one), on wall time."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
 
-    namespace = check_namespace(namespace)
+    namespace = check_namespace(namespace, "--namespace")
     if dashboard is not None:
         check_port("127.0.0.1", dashboard)  # before anything starts
     in_file = _check_inputs(policy, model_path, config, params_file, events, namespace)
