@@ -7,7 +7,7 @@ two layers sharing a line do not import each other; ``make lint`` enforces it)::
     ros | robot     rclpy: topics, conversion, nodes, recorder, replay, bags, launcher | the robots' action servers
     rosbase         what ros and robot share of rclpy: the namespace check, one turn of an executor
     registry        policy names -> policies
-    planning        the planner, dispatch from its plan, its worker process, auto
+    planning        the planner, dispatch from its plan, its worker process; auto (whole-run and per decision)
     learning | sim  torch only here: features, GATN, loss, training, learned policies | pymunk world of the case study
     policies        baselines; exact, LNS and the cumulative model (OR-Tools only here)
     core            numpy only: problem, formats, schedule rules, subteams, matching, executor, online

@@ -28,7 +28,7 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     ``auto`` without ``budget_ms`` but with ``time_limit`` (seconds of planning in all),
     ``iterations`` or ``background`` (its planner in a process of its own, for a node) is
     the planner (:mod:`lvws_ros.planning.auto`); with ``budget_ms`` (or neither), the search
-    within each decision's budget (:mod:`lvws_ros.learning.auto`)."""
+    within each decision's budget (:mod:`lvws_ros.planning.budgeted`)."""
     if name == "grp":
         from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
@@ -59,8 +59,8 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
                                      time_limit=DEFAULT_TIME_LIMIT if limit is None else float(limit),
                                      workers=options.get("workers") or 8, iterations=options.get("iterations"))
         if name == "auto":
-            from lvws_ros.learning.auto import DEFAULT_BUDGET_MS, AutoPolicy
             from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE
+            from lvws_ros.planning.budgeted import DEFAULT_BUDGET_MS, AutoPolicy
 
             budget, samples, temperature = options.get("budget_ms"), options.get("samples"), options.get("temperature")
             return AutoPolicy(model_path=model_path, seed=seed, budget_ms=DEFAULT_BUDGET_MS if budget is None else budget,
