@@ -466,20 +466,7 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     state = State.initial(inst) if state is None else state
     best = left_shift(inst, incumbent, state)
     first = float(best.makespan)
-    # mostly interchangeable robots in a team past the coalition model's size: windows over pools
-    pooled = inst.num_robots > MAX_ENUMERATED and pools_apply(inst, state)
-    found = pools(inst, state) if pooled else ()
-    if window is None:
-        window = DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if inst.travel is None else DEFAULT_WINDOW_TRAVEL
-    if window < 1:
-        raise ExpertError(f"lns: the window must hold at least one task, got {window}")
-    window_cap = max(window, 2 * (DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if inst.travel is None
-                                  else DEFAULT_WINDOW_TRAVEL))
-    scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
-    later_windows = LATER if inst.travel is None else LATER_TRAVEL
-    rng = np.random.default_rng(seed)
-    weights = np.ones(len(KINDS))  # how often each kind of neighbourhood is chosen (adapted: what shortens)
-    started = {j for j in range(inst.num_tasks) if state.task_status[j] >= TaskStatus.ASSIGNED}
+    search = _Search.start(inst, state, window, seed)
     rounds = improved = 0
     deadline = t_start + time_limit
     after = 0.0  # the longest a round ran past its solve_by so far (a left shift and check after the solve, or
@@ -490,43 +477,100 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         if bound is not None and best.makespan <= bound + TOLERANCE:
             break  # optimal: nothing left to shorten
         by_task = best.by_task()
-        todo = sorted((j for j in range(inst.num_tasks) if j not in started),
+        todo = sorted((j for j in range(inst.num_tasks) if j not in search.started),
                       key=lambda j: (by_task[inst.tasks[j].id].start, j))
         if not todo:
             break
-        if pooled:
-            kind = KINDS[int(rng.choice(len(KINDS), p=weights / weights.sum()))]
-        else:  # per robot, a third of the windows end the schedule, the rest from random times
-            kind = "tail" if rounds % 3 == 2 else "time"
-        prefix, picked, later = _neighbourhood(inst, best, by_task, todo, started, kind, window, later_windows,
-                                               rng, found)
-        whole = len(todo) <= window  # the whole rest fits one window: one solve says all, with all the time left
+        kind = search.kind(rounds)
+        prefix, picked, later = _neighbourhood(inst, best, by_task, todo, search.started, kind, search.window,
+                                               search.later_windows, search.rng, search.found)
+        whole = len(todo) <= search.window  # the whole rest fits one window: one solve says all, with all the time left
         solve_by = time.perf_counter() + (left if whole else min(round_limit, left))
         work = None if max_rounds is None else round_limit
         if work is not None:
             solve_by = deadline
-        if pooled:
-            cand, solved = _pool_window_model(inst, state, best, found, prefix, picked, later, scale, solve_by,
-                                              workers, seed + rounds, work)
-        else:
-            cand, solved = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers,
-                                         seed + rounds, work)
+        cand, solved = search.solve(best, prefix, picked, later, solve_by, workers, seed + rounds, work)
         rounds += solved != NOT_RUN
-        if adaptive and solved != NOT_RUN:  # a proven neighbourhood: try a larger one; an open one: a smaller one
-            window = min(window_cap, window + 1) if solved == CLOSED else max(MIN_WINDOW, window - 1)
-
         shorter = cand is not None and _better(_score(cand), _score(best))
         if cand is not None and shorter:
-            if check_schedule(inst, cand):
-                raise ExpertError(f"lns: neighbourhood {rounds} gave an invalid schedule (a bug): "
-                                  f"{check_schedule(inst, cand)[0]}")
+            _check_round(inst, cand, rounds)
             best = cand
             improved += 1
-        if solved != NOT_RUN:  # a kind that shortens the schedule is chosen more often (never never)
-            k = KINDS.index(kind)
-            weights[k] = max(MIN_WEIGHT, (1 - REACTION) * weights[k] + REACTION * float(shorter))
+        search.learn(kind, solved, shorter, adaptive)
         after = max(after, time.perf_counter() - solve_by)
         if whole:
             break
     best.policy = incumbent.policy
-    return LNSResult(best, rounds, improved, first, time.perf_counter() - t_start, window)
+    return LNSResult(best, rounds, improved, first, time.perf_counter() - t_start, search.window)
+
+
+def _default_window(pooled: bool, travel: bool) -> int:
+    return DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if not travel else DEFAULT_WINDOW_TRAVEL
+
+
+def _check_round(inst: Instance, cand: Schedule, rounds: int) -> None:
+    """A neighbourhood's schedule is valid, or ExpertError (a bug)."""
+    if check_schedule(inst, cand):
+        raise ExpertError(f"lns: neighbourhood {rounds} gave an invalid schedule (a bug): "
+                          f"{check_schedule(inst, cand)[0]}")
+
+
+@dataclass
+class _Search:
+    """How an :func:`improve` run picks and solves its neighbourhoods: windows over pools
+    (``pooled``: mostly interchangeable robots in a team past the coalition model's size)
+    or per robot, the window that adapts to CP-SAT's proofs and the weights of the kinds of
+    neighbourhood that adapt to what shortens the schedule."""
+
+    inst: Instance
+    state: State
+    pooled: bool
+    found: tuple[Pool, ...]
+    window: int
+    window_cap: int
+    scale: int
+    later_windows: int
+    rng: np.random.Generator
+    weights: np.ndarray  # how often each kind of neighbourhood is chosen (adapted: what shortens)
+    started: set[int]
+
+    @classmethod
+    def start(cls, inst: Instance, state: State, window: int | None, seed: int) -> _Search:
+        pooled = inst.num_robots > MAX_ENUMERATED and pools_apply(inst, state)
+        found = pools(inst, state) if pooled else ()
+        default = _default_window(pooled, inst.travel is not None)
+        if window is None:
+            window = default
+        if window < 1:
+            raise ExpertError(f"lns: the window must hold at least one task, got {window}")
+        scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
+        return cls(inst, state, pooled, found, window, max(window, 2 * default), scale,
+                   LATER if inst.travel is None else LATER_TRAVEL, np.random.default_rng(seed), np.ones(len(KINDS)),
+                   {j for j in range(inst.num_tasks) if state.task_status[j] >= TaskStatus.ASSIGNED})
+
+    def kind(self, rounds: int) -> str:
+        """The kind of the next neighbourhood: over pools drawn by the weights; per robot, a
+        third of the windows end the schedule, the rest from random times."""
+        if self.pooled:
+            return KINDS[int(self.rng.choice(len(KINDS), p=self.weights / self.weights.sum()))]
+        return "tail" if rounds % 3 == 2 else "time"
+
+    def solve(self, best: Schedule, prefix: list[int], picked: list[int], later: list[int], solve_by: float,
+              workers: int, seed: int, work: float | None) -> tuple[Schedule | None, int]:
+        """One neighbourhood's model solved: its schedule (None: none found) and NOT_RUN, OPEN or CLOSED."""
+        if self.pooled:
+            return _pool_window_model(self.inst, self.state, best, self.found, prefix, picked, later, self.scale,
+                                      solve_by, workers, seed, work)
+        return _window_model(self.inst, self.state, best, prefix, picked, later, self.scale, solve_by, workers,
+                             seed, work)
+
+    def learn(self, kind: str, solved: int, shorter: bool, adaptive: bool) -> None:
+        """After a round that ran: with ``adaptive``, a proven neighbourhood makes the window
+        larger, an open one smaller; a kind that shortens the schedule is chosen more often
+        (never never)."""
+        if solved == NOT_RUN:
+            return
+        if adaptive:
+            self.window = min(self.window_cap, self.window + 1) if solved == CLOSED else max(MIN_WINDOW, self.window - 1)
+        k = KINDS.index(kind)
+        self.weights[k] = max(MIN_WEIGHT, (1 - REACTION) * self.weights[k] + REACTION * float(shorter))
