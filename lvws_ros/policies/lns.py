@@ -174,14 +174,8 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
             per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
             model.add(start[j] >= int(release[r])).only_enforce_if(y)
             model.add_hint(y, r in incumbent_team[j])
-    last: dict[int, int] = {}  # robot -> its latest later task so far (per-robot order kept)
-    for j in sorted(later, key=lambda k: (by_task[inst.tasks[k].id].start, k)):
-        for r in incumbent_team[j]:
-            per_robot[r].append(model.new_fixed_size_interval_var(start[j], dur[j], f"I_{r}_{j}"))
-            model.add(start[j] >= int(release[r]))
-            if r in last:
-                model.add(start[j] >= end[last[r]])
-            last[r] = j
+    _keep_later(model, sorted(later, key=lambda k: (by_task[inst.tasks[k].id].start, k)), incumbent_team, start, end,
+                dur, release, per_robot)
     for j in free:
         for p in inst.prerequisites[j]:
             model.add(start[j] >= (end[p] if p in free else fixed_end[p]))
@@ -189,15 +183,9 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     if inst.travel is not None:  # the exact expert's travel model, from where the prefix leaves each robot
         after = state.copy()
         after.robot_site, after.robot_free_at = site, free_from
-        todo = window + later
-        h = _Horizon(todo, {j: by_task[inst.tasks[j].id].end for j in prefix}, scale, False, dur,
+        h = _Horizon(window + later, {j: by_task[inst.tasks[j].id].end for j in prefix}, scale, False, dur,
                      release.tolist(), None, {}, {}, t0, upper)
-        members = dict(member)
-        for j in later:  # their subteams fixed: members that must be there
-            members[j] = {r: model.new_constant(1) for r in incumbent_team[j]}
-        tv = _add_travel(model, inst, after, h, start, members, makespan)
-        if tv is not None:
-            _hint_travel(inst, after, model, tv, h, start, inc, {j: set(incumbent_team[j]) for j in todo})
+        _window_travel(model, inst, after, inc, h, start, member, later, incumbent_team, makespan)
     for intervals in per_robot:
         if len(intervals) > 1:
             model.add_no_overlap(intervals)
@@ -213,19 +201,53 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     out = _outside(inst, inc, prefix, free, {j: solver.value(start[j]) / scale for j in free})
     for j in free:
         t = inst.tasks[j]
-        if j in member:
-            team = [r for r, y in member[j].items() if solver.boolean_value(y)]
-            if not covers(inst.robot_amounts[team], inst.robot_payload[team], inst.task_needs[j], t.payload,
-                          bool(inst.task_roles[j])):
-                raise ExpertError(f"task {t.id!r}: the solver's subteam does not cover it (payload rounding)")
-            team = prune(team, inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload,
-                         roles=bool(inst.task_roles[j]))
-            robots = tuple(inst.robots[r].id for r in sorted(team))
-        else:
-            robots = by_task[t.id].robots
+        robots = _solved_team(inst, solver, j, member[j]) if j in member else by_task[t.id].robots
         s0 = solver.value(start[j]) / scale
         out.append(Assignment(t.id, robots, s0, s0 + t.duration))
     return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), closed
+
+
+def _keep_later(model: cp_model.CpModel, later: list[int], incumbent_team: dict[int, list[int]], start: dict[int, Any],
+                end: dict[int, Any], dur: dict[int, int], release: np.ndarray,
+                per_robot: list[list[cp_model.IntervalVar]]) -> None:
+    """The later tasks (in the incumbent's order of starts) keep their subteams and each
+    robot's order of them."""
+    last: dict[int, int] = {}  # robot -> its latest later task so far (per-robot order kept)
+    for j in later:
+        for r in incumbent_team[j]:
+            per_robot[r].append(model.new_fixed_size_interval_var(start[j], dur[j], f"I_{r}_{j}"))
+            model.add(start[j] >= int(release[r]))
+            if r in last:
+                model.add(start[j] >= end[last[r]])
+            last[r] = j
+
+
+def _window_travel(model: cp_model.CpModel, inst: Instance, after: State, inc: Schedule, h: _Horizon,
+                   start: dict[int, Any], member: dict[int, dict[int, cp_model.IntVar]], later: list[int],
+                   incumbent_team: dict[int, list[int]], makespan: cp_model.IntVar) -> None:
+    """The exact expert's travel model over the window (``member``: its subteams, free) and
+    the later tasks (their subteams fixed: members that must be there), from ``after``;
+    hinted with the incumbent's teams."""
+    members = dict(member)
+    for j in later:
+        members[j] = {r: model.new_constant(1) for r in incumbent_team[j]}
+    tv = _add_travel(model, inst, after, h, start, members, makespan)
+    if tv is not None:
+        _hint_travel(inst, after, model, tv, h, start, inc, {j: set(incumbent_team[j]) for j in h.todo})
+
+
+def _solved_team(inst: Instance, solver: cp_model.CpSolver, j: int, member: dict[int, cp_model.IntVar]
+                 ) -> tuple[str, ...]:
+    """Task ``j``'s subteam as the solver chose it, made inclusion-minimal (ExpertError when
+    it does not cover the task: payload rounding)."""
+    t = inst.tasks[j]
+    team = [r for r, y in member.items() if solver.boolean_value(y)]
+    if not covers(inst.robot_amounts[team], inst.robot_payload[team], inst.task_needs[j], t.payload,
+                  bool(inst.task_roles[j])):
+        raise ExpertError(f"task {t.id!r}: the solver's subteam does not cover it (payload rounding)")
+    team = prune(team, inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload,
+                 roles=bool(inst.task_roles[j]))
+    return tuple(inst.robots[r].id for r in sorted(team))
 
 
 def _solver(solve_by: float, work: float | None, workers: int, seed: int) -> cp_model.CpSolver | None:
