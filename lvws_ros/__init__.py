@@ -1,15 +1,17 @@
 """lvws_ros: heterogeneous multi-robot scheduling with dynamic subteaming and voluntary waiting.
 
-Layers (imports point down only; ``make lint`` enforces it with import-linter)::
+Layers, top to bottom, as ``.importlinter`` holds them (imports point down only, and the
+two layers sharing a line do not import each other; ``make lint`` enforces it)::
 
-    cli        the lvws command, paper tables, bag reports, Gantt charts, benchmarks
-    ros        rclpy only here: topics, message conversion, nodes, recorder, replay, bags, launcher
-    registry   policy names -> policies
-    learning   torch only here: features, GATN, loss, demonstrations, training, learned policies
-    policies   baselines; exact (OR-Tools only here)
-    sim        pymunk world of the case study (beside learning/policies, below ros)
-    core       numpy only: problem, formats, schedule rules, subteams, matching, executor, online
-    errors     LvwsError and its subclasses
+    cli             the lvws command, paper tables, bag reports, Gantt charts, benchmarks
+    ros | robot     rclpy: topics, conversion, nodes, recorder, replay, bags, launcher | the robots' action servers
+    rosbase         what ros and robot share of rclpy: the namespace check, one turn of an executor
+    registry        policy names -> policies
+    planning        the planner, dispatch from its plan, its worker process; auto (whole-run and per decision)
+    learning | sim  torch only here: features, GATN, loss, training, learned policies | pymunk world of the case study
+    policies        baselines; exact, LNS and the cumulative model (OR-Tools only here)
+    core            numpy only: problem, formats, schedule rules, subteams, matching, executor, online
+    errors          LvwsError and its subclasses
 
 The paper's equations, where they live:
 

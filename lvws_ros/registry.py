@@ -1,11 +1,13 @@
 """Policies by name: the one place that knows every policy (above all of them).
 
 The CLI, the scheduler node's ``policy`` parameter and the result tables use these
-names. Heavy modules (OR-Tools, torch) are imported only when their policy is made.
+names. Each name has a factory in one table, registered with :func:`_policy`; heavy
+modules (OR-Tools, torch) are imported only when their policy is made.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from lvws_ros.core.executor import Policy
@@ -13,7 +15,116 @@ from lvws_ros.errors import PolicyError
 
 __all__ = ["LEARNED_POLICIES", "POLICY_NAMES", "make_policy"]
 
-POLICY_NAMES = ("auto", "lvws", "lvws_sample", "lvws_rollout", "lvws_beam", "dbgm", "grp", "rand", "rand_subteam", "exact")
+Factory = Callable[[int, dict[str, Any]], Policy]  # (seed, options) -> the policy
+_FACTORIES: dict[str, Factory] = {}
+
+
+def _policy(*names: str) -> Callable[[Factory], Factory]:
+    """Register the decorated factory under ``names``."""
+    def register(factory: Factory) -> Factory:
+        for name in names:
+            _FACTORIES[name] = factory
+        return factory
+    return register
+
+
+def _model_path(options: dict[str, Any]) -> Any:
+    """A learned policy's checkpoint: empty or None is the shipped one."""
+    return options.get("model_path") or None
+
+
+def _or(value: Any, default: Any) -> Any:
+    return default if value is None else value
+
+
+@_policy("auto")
+def _auto(seed: int, options: dict[str, Any]) -> Policy:
+    """The planner with ``time_limit``, ``iterations`` or ``background`` and no ``budget_ms``;
+    else the search within each decision's budget."""
+    if options.get("budget_ms") is None and (options.get("time_limit") is not None
+                                             or options.get("iterations") is not None or options.get("background")):
+        from lvws_ros.planning.auto import DEFAULT_TIME_LIMIT, PlannedAutoPolicy
+
+        limit = options.get("time_limit")
+        return PlannedAutoPolicy(model_path=_model_path(options), seed=seed, background=bool(options.get("background")),
+                                 time_limit=DEFAULT_TIME_LIMIT if limit is None else float(limit),
+                                 workers=options.get("workers") or 8, iterations=options.get("iterations"))
+    from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE
+    from lvws_ros.planning.budgeted import DEFAULT_BUDGET_MS, AutoPolicy
+
+    return AutoPolicy(model_path=_model_path(options), seed=seed,
+                      budget_ms=_or(options.get("budget_ms"), DEFAULT_BUDGET_MS),
+                      samples=_or(options.get("samples"), DEFAULT_SAMPLES),
+                      temperature=_or(options.get("temperature"), DEFAULT_TEMPERATURE))
+
+
+@_policy("lvws")
+def _lvws(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.learning.policies import LVWSPolicy
+
+    return LVWSPolicy(model_path=_model_path(options), matching=options.get("matching") or "greedy")
+
+
+@_policy("lvws_sample")
+def _lvws_sample(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, LVWSSamplePolicy
+
+    return LVWSSamplePolicy(model_path=_model_path(options), budget_ms=options.get("budget_ms"), seed=seed,
+                            samples=_or(options.get("samples"), DEFAULT_SAMPLES),
+                            temperature=_or(options.get("temperature"), DEFAULT_TEMPERATURE))
+
+
+@_policy("lvws_rollout")
+def _lvws_rollout(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.learning.policies import LVWSRolloutPolicy
+
+    return LVWSRolloutPolicy(model_path=_model_path(options), budget_ms=options.get("budget_ms"))
+
+
+@_policy("lvws_beam")
+def _lvws_beam(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.learning.search import DEFAULT_WIDTH, LVWSBeamPolicy
+
+    return LVWSBeamPolicy(model_path=_model_path(options), budget_ms=options.get("budget_ms"),
+                          width=_or(options.get("width"), DEFAULT_WIDTH))
+
+
+@_policy("dbgm")
+def _dbgm(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.learning.policies import DBGMPolicy
+
+    return DBGMPolicy(model_path=_model_path(options))
+
+
+@_policy("grp")
+def _grp(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+    return GreedyPayloadPolicy()
+
+
+@_policy("rand")
+def _rand(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.policies.baselines import RandomPolicy
+
+    return RandomPolicy(seed)
+
+
+@_policy("rand_subteam")
+def _rand_subteam(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.policies.baselines import RandomSubteamPolicy
+
+    return RandomSubteamPolicy(seed)
+
+
+@_policy("exact")
+def _exact(seed: int, options: dict[str, Any]) -> Policy:
+    from lvws_ros.policies.exact import ExactPolicy
+
+    return ExactPolicy(seed=seed, **options)
+
+
+POLICY_NAMES = tuple(_FACTORIES)  # in the order they are registered
 LEARNED_POLICIES = ("auto", "lvws", "lvws_sample", "lvws_rollout", "lvws_beam", "dbgm")  # take a model_path
 
 
@@ -28,57 +139,8 @@ def make_policy(name: str, seed: int = 0, **options: Any) -> Policy:
     ``auto`` without ``budget_ms`` but with ``time_limit`` (seconds of planning in all),
     ``iterations`` or ``background`` (its planner in a process of its own, for a node) is
     the planner (:mod:`lvws_ros.planning.auto`); with ``budget_ms`` (or neither), the search
-    within each decision's budget (:mod:`lvws_ros.learning.auto`)."""
-    if name == "grp":
-        from lvws_ros.policies.baselines import GreedyPayloadPolicy
-
-        return GreedyPayloadPolicy()
-    if name in ("rand", "rand_subteam"):
-        from lvws_ros.policies.baselines import RandomPolicy, RandomSubteamPolicy
-
-        return RandomPolicy(seed) if name == "rand" else RandomSubteamPolicy(seed)
-    if name == "exact":
-        from lvws_ros.policies.exact import ExactPolicy
-
-        return ExactPolicy(seed=seed, **options)
-    if name in LEARNED_POLICIES:
-        from lvws_ros.learning.policies import DBGMPolicy, LVWSPolicy, LVWSRolloutPolicy
-
-        model_path = options.get("model_path") or None
-        kinds: dict[str, type[LVWSPolicy | DBGMPolicy | LVWSRolloutPolicy]] = {
-            "lvws": LVWSPolicy, "dbgm": DBGMPolicy, "lvws_rollout": LVWSRolloutPolicy}
-        if name == "lvws_rollout":
-            return LVWSRolloutPolicy(model_path=model_path, budget_ms=options.get("budget_ms"))
-        if name == "auto" and options.get("budget_ms") is None \
-                and (options.get("time_limit") is not None or options.get("iterations") is not None
-                     or options.get("background")):
-            from lvws_ros.planning.auto import DEFAULT_TIME_LIMIT, PlannedAutoPolicy
-
-            limit = options.get("time_limit")
-            return PlannedAutoPolicy(model_path=model_path, seed=seed, background=bool(options.get("background")),
-                                     time_limit=DEFAULT_TIME_LIMIT if limit is None else float(limit),
-                                     workers=options.get("workers") or 8, iterations=options.get("iterations"))
-        if name == "auto":
-            from lvws_ros.learning.auto import DEFAULT_BUDGET_MS, AutoPolicy
-            from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE
-
-            budget, samples, temperature = options.get("budget_ms"), options.get("samples"), options.get("temperature")
-            return AutoPolicy(model_path=model_path, seed=seed, budget_ms=DEFAULT_BUDGET_MS if budget is None else budget,
-                              samples=DEFAULT_SAMPLES if samples is None else samples,
-                              temperature=DEFAULT_TEMPERATURE if temperature is None else temperature)
-        if name == "lvws_sample":
-            from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, LVWSSamplePolicy
-
-            samples, temperature = options.get("samples"), options.get("temperature")
-            return LVWSSamplePolicy(model_path=model_path, budget_ms=options.get("budget_ms"), seed=seed,
-                                    samples=DEFAULT_SAMPLES if samples is None else samples,
-                                    temperature=DEFAULT_TEMPERATURE if temperature is None else temperature)
-        if name == "lvws_beam":
-            from lvws_ros.learning.search import DEFAULT_WIDTH, LVWSBeamPolicy
-
-            return LVWSBeamPolicy(model_path=model_path, budget_ms=options.get("budget_ms"),
-                                  width=DEFAULT_WIDTH if options.get("width") is None else options["width"])
-        if name == "lvws":
-            return LVWSPolicy(model_path=model_path, matching=options.get("matching") or "greedy")
-        return kinds[name](model_path=model_path)
-    raise PolicyError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")
+    within each decision's budget (:mod:`lvws_ros.planning.budgeted`)."""
+    factory = _FACTORIES.get(name)
+    if factory is None:
+        raise PolicyError(f"unknown policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")
+    return factory(seed, options)

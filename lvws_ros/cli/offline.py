@@ -447,7 +447,22 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--count", type=int, default=None, help="only the first COUNT instances")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_solve(add)
+    _add_import(add)
+    p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")
+    p.add_argument("instance")
+    p.add_argument("schedule")
 
+    _add_evaluate(add)
+    _add_train(add)
+
+    p = add("gantt", cmd_gantt, "draw a schedule as a Gantt chart (PNG)")
+    p.add_argument("schedule")
+    p.add_argument("--instance", help="the instance, to show robots that never work")
+    p.add_argument("--out", required=True)
+
+
+def _add_solve(add: Adder) -> None:
     p = add("solve", cmd_solve, "schedule an instance with a policy; prints lvws-schedule/1 JSON (to --out instead "
             "when given)")
     p.add_argument("instance")
@@ -475,6 +490,8 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--noise-seed", type=int, default=0, help="the noise's seed (with --noise)")
     p.add_argument("--out", help="write the schedule to this file instead of stdout")
 
+
+def _add_import(add: Adder) -> None:
     p = add("import", cmd_import, "turn a multi-skill project scheduling file (MiniZinc data, .dzn), a PSPLIB "
                                    "project scheduling file (.sm or Patterson .rcp), CSV files of robots and "
                                    "tasks, or an instance folder of the DCMRTA / CTAS-D coalition benchmarks "
@@ -490,18 +507,6 @@ def add_parsers(add: Adder) -> None:
     p.add_argument("--out", required=True, help="the lvws-instance/1 file to write")
     p.add_argument("--plan", default=None, help="dcmrta: also the folder's results.yaml (the CTAS-D MILP's plan), "
                                                 "carried out by the executor, to this lvws-schedule/1 file")
-
-    p = add("check", cmd_check, "check a schedule against an instance (exit 0 only when valid)")
-    p.add_argument("instance")
-    p.add_argument("schedule")
-
-    _add_evaluate(add)
-    _add_train(add)
-
-    p = add("gantt", cmd_gantt, "draw a schedule as a Gantt chart (PNG)")
-    p.add_argument("schedule")
-    p.add_argument("--instance", help="the instance, to show robots that never work")
-    p.add_argument("--out", required=True)
 
 
 def _add_evaluate(add: Adder) -> None:
@@ -574,6 +579,12 @@ def _add_train(add: Adder) -> None:
     p.add_argument("--resume", default=None,
                    help="continue from a training checkpoint (*.train.pt; with --improve: *.improve.pt)")
     p.add_argument("--device", default="cpu", help="where training runs: cpu (default), cuda, cuda:N, or auto")
+    _add_improve_options(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _add_improve_options(p: argparse.ArgumentParser) -> None:
+    """``lvws train``'s self-improvement options, in a group of their own."""
     g = p.add_argument_group("self-improvement (--improve): labels from the policy's own best schedules")
     g.add_argument("--improve", type=int, default=0, metavar="ROUNDS",
                    help="rounds of self-improvement from --init (default: the shipped model) instead of imitation; "
@@ -594,4 +605,3 @@ def _add_train(add: Adder) -> None:
                    help="label only instances where a candidate beats LVWS's own schedule")
     g.add_argument("--large", type=int, default=0,
                    help="training instances of the mixture at 20-60 robots x 50-200 tasks (no proof needed)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -224,6 +224,13 @@ Adder = Any  # (name, function, help) -> argparse.ArgumentParser
 
 
 def add_parsers(add: Adder) -> None:
+    _add_sim(add)
+    _add_launch(add)
+    _add_world_calls(add)
+    _add_scheduler_and_bags(add)
+
+
+def _add_sim(add: Adder) -> None:
     p = add("sim", cmd_sim, "run the assembly-cell case study in-process with a policy (no ROS)")
     p.add_argument("--policy", choices=POLICY_NAMES, default="lvws")
     p.add_argument("--seed", type=int, default=0)
@@ -244,6 +251,8 @@ def add_parsers(add: Adder) -> None:
                    help="comma-separated policies: each one's plan with travel, its executed makespan, and the "
                         "makespan when the scheduler is told no travel (a cell with plan_travel)")
 
+
+def _add_launch(add: Adder) -> None:
     p = add("launch", cmd_launch, "the case study on ROS 2: cell_sim + scheduler + recorder, then a summary")
     p.add_argument("--policy", choices=POLICY_NAMES, default=None,
                    help="scheduling policy (default: the --params-file's, else auto)")
@@ -276,6 +285,9 @@ def add_parsers(add: Adder) -> None:
                    help=f"serve the run's web dashboard on 127.0.0.1:PORT while it lasts (default port {DEFAULT_PORT}; "
                         "the printed URL carries its token)")
 
+
+def _add_world_calls(add: Adder) -> None:
+    """submit, cancel and fault: calls to a running cell's services."""
     for name, help_text in (
             ("submit", "add tasks to a running cell (cell_sim's submit_tasks service)"),
             ("cancel", "cancel a task of a running cell (cell_sim's cancel_task service)"),
@@ -292,6 +304,10 @@ def add_parsers(add: Adder) -> None:
         p.add_argument("--domain-id", type=int, default=None, help="the cell's ROS_DOMAIN_ID (lvws launch prints it)")
         p.add_argument("--timeout", type=float, default=20.0, help="wall seconds to wait for the simulator")
 
+
+def _add_scheduler_and_bags(add: Adder) -> None:
+    """The scheduler node's --help, the dashboard (live or a bag) and the commands on
+    recorded runs: report, verify, reindex, replay."""
     # main() hands `lvws scheduler ...` to the node; this parser only serves --help
     p = add("scheduler", None, "the scheduler node (same as `ros2 run lvws_ros scheduler`)")
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args ... for rclpy")

@@ -507,6 +507,21 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
     rp, tp = Path(robots_csv), Path(tasks_csv)
     r_head, r_rows = _rows(rp)
     t_head, t_rows = _rows(tp)
+    traits = _csv_traits(rp, r_head, tp, t_head)
+    sites = _csv_sites(Path(sites_csv)) if sites_csv is not None else {}
+    robots, robot_sites, homes = _csv_robots(rp, r_rows, traits, sites)
+    tasks, task_sites = _csv_tasks(tp, t_rows, traits, sites)
+    try:
+        travel = build_travel(sites, {}, robot_sites, task_sites, homes) if sites else None
+        return Instance(name or tp.stem, (), tuple(robots), tuple(tasks), travel=travel, traits=tuple(traits),
+                        objective=objective)
+    except InstanceError as exc:  # what needs the whole instance (a cycle, a task no robot can cover)
+        raise InstanceError(f"{rp} and {tp}: {exc}") from None
+
+
+def _csv_traits(rp: Path, r_head: list[str], tp: Path, t_head: list[str]) -> list[str]:
+    """The traits: the robots' columns that are no robot field; InstanceError for a trait
+    named as a task field, a task column that is neither, or no ``duration`` column."""
     traits = [c for c in r_head if c not in _ROBOT_COLUMNS]
     taken = [c for c in traits if c in _TASK_COLUMNS]
     if taken:
@@ -517,24 +532,33 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
                             f"(traits: {traits})")
     if "duration" not in t_head:
         raise InstanceError(f"{tp} line 1: the header needs a 'duration' column")
+    return traits
+
+
+def _csv_sites(sp: Path) -> dict[str, list[float]]:
+    """The sites file (``name,x,y``; a header line ``name,...`` and empty lines skipped)."""
     sites: dict[str, list[float]] = {}
-    if sites_csv is not None:
-        sp = Path(sites_csv)
-        try:
-            with sp.open(newline="", encoding="utf-8-sig") as f:
-                reader = csv.reader(f)
-                for cells in reader:
-                    where = f"{sp} line {reader.line_num}"
-                    if not any(c.strip() for c in cells) or \
-                            (reader.line_num == 1 and cells and cells[0].strip().lower() == "name"):
-                        continue
-                    if len(cells) != 3:
-                        raise InstanceError(f"{where}: expected name,x,y")
-                    sites[cells[0].strip()] = [_coord(cells[1], f"{where}: x"), _coord(cells[2], f"{where}: y")]
-        except (OSError, UnicodeDecodeError, csv.Error) as exc:
-            raise InstanceError(f"{sp}: cannot read the CSV file: {exc}") from None
+    try:
+        with sp.open(newline="", encoding="utf-8-sig") as f:
+            reader = csv.reader(f)
+            for cells in reader:
+                where = f"{sp} line {reader.line_num}"
+                if not any(c.strip() for c in cells) or \
+                        (reader.line_num == 1 and cells and cells[0].strip().lower() == "name"):
+                    continue
+                if len(cells) != 3:
+                    raise InstanceError(f"{where}: expected name,x,y")
+                sites[cells[0].strip()] = [_coord(cells[1], f"{where}: x"), _coord(cells[2], f"{where}: y")]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InstanceError(f"{sp}: cannot read the CSV file: {exc}") from None
+    return sites
+
+
+def _csv_robots(rp: Path, rows: list[tuple[int, dict[str, str]]], traits: list[str], sites: dict[str, list[float]]
+                ) -> tuple[list[Robot], list[tuple[str, str, float | None]], list[str | None]]:
+    """The robots, and with sites each robot's (id, site, speed) and home."""
     robots, robot_sites, homes = [], [], []
-    for line, row in r_rows:
+    for line, row in rows:
         where = f"{rp} line {line}"
         rid = row["id"].strip()
         amounts = tuple((c, _amount(row[c], f"{where}: {c}")) for c in traits if row[c].strip())
@@ -553,9 +577,15 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
             homes.append(home or None)
         elif any(row.get(c, "").strip() for c in ("site", "speed", "home")):
             raise InstanceError(f"{where}: site, speed and home need the sites file (--sites)")
+    return robots, robot_sites, homes
+
+
+def _csv_tasks(tp: Path, rows: list[tuple[int, dict[str, str]]], traits: list[str], sites: dict[str, list[float]]
+               ) -> tuple[list[Task], list[tuple[str, str, str]]]:
+    """The tasks, and with sites each task's (id, site or from, site or to)."""
     tasks, task_sites = [], []
-    known = {row["id"].strip() for _, row in t_rows}
-    for line, row in t_rows:
+    known = {row["id"].strip() for _, row in rows}
+    for line, row in rows:
         where = f"{tp} line {line}"
         tid = row["id"].strip()
         if not sites and any(row.get(c, "").strip() for c in ("site", "from", "to")):
@@ -579,12 +609,7 @@ def import_csv(robots_csv: str | Path, tasks_csv: str | Path, sites_csv: str | P
             for name in {a, b} - set(sites):
                 raise InstanceError(f"{where}: unknown site {name!r} (sites: {', '.join(list(sites)[:10])})")
             task_sites.append((tid, a, b))
-    try:
-        travel = build_travel(sites, {}, robot_sites, task_sites, homes) if sites else None
-        return Instance(name or tp.stem, (), tuple(robots), tuple(tasks), travel=travel, traits=tuple(traits),
-                        objective=objective)
-    except InstanceError as exc:  # what needs the whole instance (a cycle, a task no robot can cover)
-        raise InstanceError(f"{rp} and {tp}: {exc}") from None
+    return tasks, task_sites
 
 
 def _coord(text: str, where: str) -> float:

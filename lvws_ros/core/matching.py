@@ -101,6 +101,121 @@ def _drop_redundant(team: list[int], rewards: FloatArray, robot_caps: AmountArra
     return team
 
 
+class _Greedy:
+    """The greedy's state between picks: free and waiting robots, open tasks and their
+    partial subteams, what each task still misses, who still helps which task, and what
+    the free robots allowed for each task bring to it (updated as robots leave and rejoin
+    the pool, not recomputed)."""
+
+    def __init__(self, robot_caps: AmountArray, robot_payload: FloatArray, task_caps: AmountArray,
+                 task_payload: FloatArray, allowed: BoolArray | None, roles: BoolArray | None) -> None:
+        n, m = robot_caps.shape[0], task_caps.shape[0]
+        self.robot_payload, self.task_caps, self.task_payload = robot_payload, task_caps, task_payload
+        self.free = np.ones(n, dtype=bool)
+        self.waiting = np.zeros(n, dtype=bool)
+        self.open_task = np.ones(m, dtype=bool)
+        self.amounts = np.asarray(robot_caps, dtype=np.float64)
+        self.missing_caps = np.asarray(task_caps, dtype=np.float64).copy()
+        self.missing_payload = task_payload.astype(np.float64).copy()
+        self.member = np.zeros((n, m), dtype=bool)
+        self.closed_teams: dict[int, tuple[int, ...]] = {}
+        self.with_roles = np.zeros(m, dtype=bool) if roles is None else np.asarray(roles, dtype=bool)
+        # with roles, any holder of a needed trait helps
+        role_helpers = helps(self.amounts, task_caps[self.with_roles], task_payload[self.with_roles])
+        self.payload64 = robot_payload.astype(np.float64)
+        self.reach = np.ones((n, m), dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
+        # What the free robots allowed for each task bring to it (m, K) and (m,): updated as
+        # robots leave and rejoin the pool (whole amounts add up exactly; a tolerance covers the rest).
+        self.free_caps = self.reach.T.astype(np.float64) @ self.amounts
+        self.free_payload = self.reach.T.astype(np.float64) @ self.payload64
+        self.useful = helps(self.amounts, self.missing_caps, self.missing_payload)
+        self.useful[:, self.with_roles] = role_helpers
+
+    def shift(self, rows: IntArray, sign: float) -> None:
+        """Robots ``rows`` leave (-1) or rejoin (+1) the free pool."""
+        if len(rows):
+            counts = sign * self.reach[rows].T.astype(np.float64)  # (m, len(rows))
+            self.free_caps[...] += counts @ self.amounts[rows]
+            self.free_payload[...] += counts @ self.payload64[rows]
+
+    def completable(self) -> BoolArray:
+        """The tasks whose missing capabilities and payload can still come from free robots
+        (with roles: exactly, from the members and the free robots allowed)."""
+        completable = covered(self.free_caps, self.free_payload, self.missing_caps, self.missing_payload)
+        for q in np.flatnonzero(self.open_task & self.with_roles):
+            pool = self.member[:, q] | (self.free & self.reach[:, q])  # exactly, with roles
+            completable[q] = covers(self.amounts[pool], self.robot_payload[pool], self.task_caps[q],
+                                    self.task_payload[q], True)
+        return completable
+
+    def release_dead(self, completable: BoolArray) -> bool:
+        """The first partial subteam that cannot be completed releases its robots (one task
+        at a time, since released robots may complete another); whether there was one."""
+        dead = np.flatnonzero(self.open_task & ~completable & self.member.any(axis=0))
+        if not len(dead):
+            return False
+        j = int(dead[0])
+        self.shift(np.flatnonzero(self.member[:, j]), 1.0)
+        self.free |= self.member[:, j]
+        self.member[:, j] = False
+        self.open_task[j] = False
+        return True
+
+    def pick(self, r: FloatArray, completable: BoolArray) -> bool:
+        """The next pick (or the run of idle picks :func:`_idle_first` finds); False when no
+        robot is free."""
+        rows = np.flatnonzero(self.free)
+        if not len(rows):
+            return False
+        ok = (self.open_task & completable)[None, :] & self.useful[rows] & self.reach[rows]
+        idle = _idle_first(r, rows, ok, self.free_caps, self.free_payload, self.missing_caps, self.missing_payload,
+                           self.amounts, self.payload64, self.reach, self.open_task & self.member.any(axis=0),
+                           self.with_roles)
+        if len(idle) > 1:  # the picks one by one would send these to the idle task, in this order
+            self.free[idle] = False
+            self.waiting[idle] = True
+            self.shift(idle, -1.0)
+            return True
+        k, j = _best_pick(r[rows], ok)
+        i = int(rows[k])
+        self.free[i] = False
+        self.shift(np.array([i]), -1.0)
+        if j == r.shape[1] - 1:
+            self.waiting[i] = True
+        else:
+            self.join(r, i, j)
+        return True
+
+    def join(self, r: FloatArray, i: int, j: int) -> None:
+        """Robot ``i`` joins task ``j``'s partial subteam; the task closes once covered."""
+        self.member[i, j] = True
+        self.missing_caps[j] -= self.amounts[i]
+        self.missing_payload[j] -= self.robot_payload[i]
+        if self.with_roles[j]:
+            team = self.member[:, j]
+            done = covers(self.amounts[team], self.robot_payload[team], self.task_caps[j], self.task_payload[j], True)
+        else:
+            self.useful[:, j] = helps(self.amounts, self.missing_caps[j][None, :], self.missing_payload[j:j + 1])[:, 0]
+            done = bool(covered(np.zeros_like(self.missing_caps[j]), 0.0, self.missing_caps[j], self.missing_payload[j]))
+        if done:
+            self.close(r, j)
+
+    def close(self, r: FloatArray, j: int) -> None:
+        """Task ``j`` closes with its subteam minus the members made redundant, who go back
+        to the pool."""
+        team = _drop_redundant([int(x) for x in np.flatnonzero(self.member[:, j])], r[:, j], self.amounts,
+                               self.robot_payload, self.task_caps[j], float(self.task_payload[j]),
+                               bool(self.with_roles[j]))
+        released = self.member[:, j].copy()
+        released[team] = False
+        self.shift(np.flatnonzero(released), 1.0)
+        self.free |= released  # redundant members go back to the pool
+        self.member[:, j] = False
+        self.member[team, j] = True
+        self.open_task[j] = False
+        self.closed_teams[j] = tuple(team)
+
+
 def greedy_match(
     r: FloatArray,
     robot_caps: AmountArray,
@@ -129,83 +244,12 @@ def greedy_match(
     n, m = check_shapes(r, robot_caps, robot_payload, task_caps, task_payload)
     if allowed is not None and allowed.shape != (n, m):
         raise ValueError(f"allowed has shape {allowed.shape}, expected ({n}, {m})")
-    free = np.ones(n, dtype=bool)
-    waiting = np.zeros(n, dtype=bool)
-    open_task = np.ones(m, dtype=bool)
-    amounts = np.asarray(robot_caps, dtype=np.float64)
-    missing_caps = np.asarray(task_caps, dtype=np.float64).copy()
-    missing_payload = task_payload.astype(np.float64).copy()
-    member = np.zeros((n, m), dtype=bool)
-    closed_teams: dict[int, tuple[int, ...]] = {}
-    with_roles = np.zeros(m, dtype=bool) if roles is None else np.asarray(roles, dtype=bool)
-    role_helpers = helps(amounts, task_caps[with_roles], task_payload[with_roles])  # any holder of a needed trait
-    payload64 = robot_payload.astype(np.float64)
-    reach = np.ones((n, m), dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
-    # What the free robots allowed for each task bring to it (m, K) and (m,): updated as
-    # robots leave and rejoin the pool (whole amounts add up exactly; a tolerance covers the rest).
-    free_caps = reach.T.astype(np.float64) @ amounts
-    free_payload = reach.T.astype(np.float64) @ payload64
-    useful = helps(amounts, missing_caps, missing_payload)
-    useful[:, with_roles] = role_helpers
-
-    def shift(rows: IntArray, sign: float) -> None:  # robots leave (-1) or rejoin (+1) the free pool
-        if len(rows):
-            counts = sign * reach[rows].T.astype(np.float64)  # (m, len(rows))
-            free_caps[...] += counts @ amounts[rows]
-            free_payload[...] += counts @ payload64[rows]
-
+    state = _Greedy(robot_caps, robot_payload, task_caps, task_payload, allowed, roles)
     while True:
-        # A task is completable when its missing capabilities and payload can still come
-        # from free robots. A partial subteam that cannot be completed releases its robots
-        # (one task at a time, since released robots may complete another).
-        completable = covered(free_caps, free_payload, missing_caps, missing_payload)
-        for q in np.flatnonzero(open_task & with_roles):
-            pool = member[:, q] | (free & reach[:, q])  # exactly, with roles
-            completable[q] = covers(amounts[pool], robot_payload[pool], task_caps[q], task_payload[q], True)
-        dead = np.flatnonzero(open_task & ~completable & member.any(axis=0))
-        if len(dead):
-            j = int(dead[0])
-            shift(np.flatnonzero(member[:, j]), 1.0)
-            free |= member[:, j]
-            member[:, j] = False
-            open_task[j] = False
+        completable = state.completable()
+        if state.release_dead(completable):
             continue
-        rows = np.flatnonzero(free)
-        if not len(rows):
+        if not state.pick(r, completable):
             break
-        ok = (open_task & completable)[None, :] & useful[rows] & reach[rows]
-        idle = _idle_first(r, rows, ok, free_caps, free_payload, missing_caps, missing_payload, amounts, payload64,
-                           reach, open_task & member.any(axis=0), with_roles)
-        if len(idle) > 1:  # the picks one by one would send these to the idle task, in this order
-            free[idle] = False
-            waiting[idle] = True
-            shift(idle, -1.0)
-            continue
-        k, j = _best_pick(r[rows], ok)
-        i = int(rows[k])
-        free[i] = False
-        shift(np.array([i]), -1.0)
-        if j == m:
-            waiting[i] = True
-            continue
-        member[i, j] = True
-        missing_caps[j] -= amounts[i]
-        missing_payload[j] -= robot_payload[i]
-        if with_roles[j]:
-            done = covers(amounts[member[:, j]], robot_payload[member[:, j]], task_caps[j], task_payload[j], True)
-        else:
-            useful[:, j] = helps(amounts, missing_caps[j][None, :], missing_payload[j:j + 1])[:, 0]
-            done = bool(covered(np.zeros_like(missing_caps[j]), 0.0, missing_caps[j], missing_payload[j]))
-        if done:
-            team = _drop_redundant([int(x) for x in np.flatnonzero(member[:, j])], r[:, j], amounts,
-                                   robot_payload, task_caps[j], float(task_payload[j]), bool(with_roles[j]))
-            released = member[:, j].copy()
-            released[team] = False
-            shift(np.flatnonzero(released), 1.0)
-            free |= released  # redundant members go back to the pool
-            member[:, j] = False
-            member[team, j] = True
-            open_task[j] = False
-            closed_teams[j] = tuple(team)
-    wait = tuple(int(i) for i in np.flatnonzero(waiting))
-    return Match(closed_teams, wait, match_reward(r, closed_teams, wait))
+    wait = tuple(int(i) for i in np.flatnonzero(state.waiting))
+    return Match(state.closed_teams, wait, match_reward(r, state.closed_teams, wait))

@@ -360,24 +360,71 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
         f"training seed {tcfg.seed})")
     start: GATN | None = None
     if init is not None:
-        start, init_meta = load_checkpoint(init)
-        if tcfg.model.wait_head and start.wait is None and init_meta.get("kind") != "dbgm":
-            grown = GATN(replace(start.cfg, wait_head=True))  # a fresh wait head on the initial weights
-            grown.load_state_dict(start.state_dict(), strict=False)
-            start = grown
-            log(f"{init}: a wait head added")
-        if start.cfg.pair_features < PAIR_FEATURES:  # an older model: learn to read the features it lacks
-            wider = GATN(replace(start.cfg, pair_features=PAIR_FEATURES))
-            state = start.state_dict()
-            old_w = state["psi_p.weight"]
-            state["psi_p.weight"] = torch.cat([old_w, old_w.new_zeros(old_w.shape[0], PAIR_FEATURES - old_w.shape[1])],
-                                              dim=1)  # the new columns start at zero: the same outputs at first
-            wider.load_state_dict(state)
-            start = wider
-            log(f"{init}: reads {PAIR_FEATURES - old_w.shape[1]} more pair features from now on "
-                f"({MODEL_FORMAT})")
-        tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
-        log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")
+        start, tcfg = _initial_model(init, tcfg, log)
+    demos = _expert_demos(cfg, train_set, bool(own), cache_dir, progress, log)
+    optimal = {k: makespan for k, (makespan, _) in  # best known within the limit: only for model selection
+               validation_makespans(val_set, VALIDATION_TIME_LIMIT, 2, cache_dir, log).items()}
+    stages: list[dict[str, Any]] = []
+    model, history = train(demos, tcfg, model=start, checkpoint=Path(out).with_suffix(".train.pt"), resume=resume,
+                           progress=progress, log=log)
+    best = calibrate(model, val_set, optimal, tcfg.dbgm, log)
+    stages.append(_stage("imitation", len(demos), history, best))
+    rng = np.random.default_rng(tcfg.seed)
+    for rnd in range(cfg.dagger_rounds):
+        picks = rng.choice(len(train_set), size=min(cfg.dagger_instances, len(train_set)), replace=False)
+        demos = _dagger_demos(cfg, tcfg, [train_set[k] for k in picks], model, best, demos, rnd, progress, log)
+        round_cfg = TrainConfig(**{**asdict(tcfg), "model": tcfg.model, "epochs": cfg.dagger_epochs,
+                                   "lr": tcfg.lr / 2, "seed": tcfg.seed + rnd + 1})
+        candidate, history = train(demos, round_cfg, model=copy.deepcopy(model), progress=progress, log=log)
+        cand = calibrate(candidate, val_set, optimal, tcfg.dbgm, log)
+        stages.append(_stage(f"dagger-{rnd + 1}", len(demos), history, cand))
+        if cand.score < best.score:  # keep a round only when it helps on validation
+            model, best = candidate, cand
+    meta = {"kind": "dbgm" if tcfg.dbgm else "lvws", "idle_bias": best.idle_bias,
+            "wait_threshold": best.wait_threshold, "validation_suboptimality": best.score,
+            "datasets": list(cfg.datasets), "families": [list(f) for f in cfg.families], "own_instances": len(own),
+            "init": str(init) if init else None, "data_seed": cfg.data_seed, "training_seed": tcfg.seed,
+            "pipeline": {k: v for k, v in asdict(cfg).items() if k != "train"}, "stages": stages}
+    save_checkpoint(out, model, _with_config(meta, tcfg, model))
+    log(f"model written to {out}: idle bias {best.idle_bias:g}, wait threshold {best.wait_threshold}, "
+        f"validation suboptimality {best.score:.2f} %")
+    return model, meta
+
+
+def _stage(name: str, states: int, history: Any, calibration: Calibration) -> dict[str, Any]:
+    """One stage of the pipeline as the checkpoint's metadata lists it."""
+    return {"stage": name, "states": states, "history": history, "idle_bias": calibration.idle_bias,
+            "wait_threshold": calibration.wait_threshold, "validation_suboptimality": calibration.score}
+
+
+def _initial_model(init: str | Path, tcfg: TrainConfig, log: Callable[[str], None]) -> tuple[GATN, TrainConfig]:
+    """``init``'s model to fine-tune (a wait head added when ``tcfg`` asks for one, the pair
+    features it lacks added at zero weight) and the training configuration of its model."""
+    start, init_meta = load_checkpoint(init)
+    if tcfg.model.wait_head and start.wait is None and init_meta.get("kind") != "dbgm":
+        grown = GATN(replace(start.cfg, wait_head=True))  # a fresh wait head on the initial weights
+        grown.load_state_dict(start.state_dict(), strict=False)
+        start = grown
+        log(f"{init}: a wait head added")
+    if start.cfg.pair_features < PAIR_FEATURES:  # an older model: learn to read the features it lacks
+        wider = GATN(replace(start.cfg, pair_features=PAIR_FEATURES))
+        state = start.state_dict()
+        old_w = state["psi_p.weight"]
+        state["psi_p.weight"] = torch.cat([old_w, old_w.new_zeros(old_w.shape[0], PAIR_FEATURES - old_w.shape[1])],
+                                          dim=1)  # the new columns start at zero: the same outputs at first
+        wider.load_state_dict(state)
+        start = wider
+        log(f"{init}: reads {PAIR_FEATURES - old_w.shape[1]} more pair features from now on "
+            f"({MODEL_FORMAT})")
+    tcfg = TrainConfig(**{**asdict(tcfg), "model": start.cfg, "dbgm": init_meta.get("kind") == "dbgm"})
+    log(f"fine-tuning {init} ({init_meta.get('kind', 'lvws')})")
+    return start, tcfg
+
+
+def _expert_demos(cfg: PipelineConfig, train_set: Sequence[Instance], own: bool, cache_dir: str | Path | None,
+                  progress: bool, log: Callable[[str], None]) -> list[Demo]:
+    """The expert's demonstrations on the training set (with ``own`` instances: one group),
+    from the cache under ``cache_dir`` when it holds them, else labelled and cached."""
     demos: list[Demo] = []
     own_group = [("-".join([*cfg.datasets, *(f"{k}{n}" for k, n in cfg.families), "own"]), list(train_set))]
     for sources, part in own_group if own else _cache_groups(cfg, train_set):
@@ -391,41 +438,20 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, *, cache_dir: str | Path 
             if cache is not None:
                 save_demos(got, cache, {"datasets": cfg.datasets, "data_seed": cfg.data_seed})
         demos += got
-    optimal = {k: makespan for k, (makespan, _) in  # best known within the limit: only for model selection
-               validation_makespans(val_set, VALIDATION_TIME_LIMIT, 2, cache_dir, log).items()}
-    stages: list[dict[str, Any]] = []
-    model, history = train(demos, tcfg, model=start, checkpoint=Path(out).with_suffix(".train.pt"), resume=resume,
-                           progress=progress, log=log)
-    best = calibrate(model, val_set, optimal, tcfg.dbgm, log)
-    stages.append({"stage": "imitation", "states": len(demos), "history": history, "idle_bias": best.idle_bias,
-                   "wait_threshold": best.wait_threshold, "validation_suboptimality": best.score})
-    rng = np.random.default_rng(tcfg.seed)
-    for rnd in range(cfg.dagger_rounds):
-        picks = rng.choice(len(train_set), size=min(cfg.dagger_instances, len(train_set)), replace=False)
-        state_dict = {k: v.detach().clone() for k, v in model.state_dict().items()}
-        jobs = [(train_set[k], state_dict, model.cfg.to_dict(), tcfg.dbgm, best.idle_bias, best.wait_threshold,
-                 cfg.label_time_limit, cfg.dagger_states, cfg.targets) for k in picks]
-        t0 = time.perf_counter()
-        new = label_instances([], processes=cfg.processes, ray_address=cfg.ray_address, progress=progress,
-                              jobs=jobs, job=_dagger_job)
-        demos = [*demos, *new]
-        log(f"DAgger round {rnd + 1}: {len(new)} states labelled in {time.perf_counter() - t0:.0f} s, "
-            f"{len(demos)} in all")
-        round_cfg = TrainConfig(**{**asdict(tcfg), "model": tcfg.model, "epochs": cfg.dagger_epochs,
-                                   "lr": tcfg.lr / 2, "seed": tcfg.seed + rnd + 1})
-        candidate, history = train(demos, round_cfg, model=copy.deepcopy(model), progress=progress, log=log)
-        cand = calibrate(candidate, val_set, optimal, tcfg.dbgm, log)
-        stages.append({"stage": f"dagger-{rnd + 1}", "states": len(demos), "history": history,
-                       "idle_bias": cand.idle_bias, "wait_threshold": cand.wait_threshold,
-                       "validation_suboptimality": cand.score})
-        if cand.score < best.score:  # keep a round only when it helps on validation
-            model, best = candidate, cand
-    meta = {"kind": "dbgm" if tcfg.dbgm else "lvws", "idle_bias": best.idle_bias,
-            "wait_threshold": best.wait_threshold, "validation_suboptimality": best.score,
-            "datasets": list(cfg.datasets), "families": [list(f) for f in cfg.families], "own_instances": len(own),
-            "init": str(init) if init else None, "data_seed": cfg.data_seed, "training_seed": tcfg.seed,
-            "pipeline": {k: v for k, v in asdict(cfg).items() if k != "train"}, "stages": stages}
-    save_checkpoint(out, model, _with_config(meta, tcfg, model))
-    log(f"model written to {out}: idle bias {best.idle_bias:g}, wait threshold {best.wait_threshold}, "
-        f"validation suboptimality {best.score:.2f} %")
-    return model, meta
+    return demos
+
+
+def _dagger_demos(cfg: PipelineConfig, tcfg: TrainConfig, instances: list[Instance], model: GATN, best: Calibration,
+                  demos: list[Demo], rnd: int, progress: bool, log: Callable[[str], None]) -> list[Demo]:
+    """DAgger round ``rnd``: ``demos`` and the expert's labels of the states ``model`` (at
+    its calibration ``best``) reaches on ``instances``."""
+    state_dict = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    jobs = [(inst, state_dict, model.cfg.to_dict(), tcfg.dbgm, best.idle_bias, best.wait_threshold,
+             cfg.label_time_limit, cfg.dagger_states, cfg.targets) for inst in instances]
+    t0 = time.perf_counter()
+    new = label_instances([], processes=cfg.processes, ray_address=cfg.ray_address, progress=progress,
+                          jobs=jobs, job=_dagger_job)
+    demos = [*demos, *new]
+    log(f"DAgger round {rnd + 1}: {len(new)} states labelled in {time.perf_counter() - t0:.0f} s, "
+        f"{len(demos)} in all")
+    return demos

@@ -1,3 +1,5 @@
 """The planner (above the models it runs): one whole plan, dispatched from at once and
 improved while the robots work (``planner``), its repair and dispatch (``follow``), its
-process beside a node (``worker``), and ``auto`` as its face (``auto``)."""
+process beside a node (``worker``), and ``auto`` as its face (``auto``); ``auto`` within a
+budget per decision step (``budgeted``); a quick plan for robots that set out on their
+own (``ahead``)."""

@@ -951,35 +951,14 @@ def exact_match(
         for i, j in zip(*np.nonzero(~allowed), strict=True):
             model.add(a[i][j] == 0)
     z = [model.new_bool_var(f"z_{j}") for j in range(m)]
-    pay, need = _units(np.asarray(robot_payload, dtype=np.float64), np.asarray(task_payload, dtype=np.float64))
-    binary = np.all((robot_caps == 0) | (robot_caps == 1), axis=0)  # (K,): capabilities
-    amt = np.zeros(np.shape(robot_caps), dtype=np.int64)
-    want = np.zeros(np.shape(task_caps), dtype=np.int64)
-    for col in range(int(np.shape(robot_caps)[1])):  # each trait in integers never accepting a subteam short of it
-        amt[:, col], want[:, col] = _units(np.asarray(robot_caps[:, col], dtype=np.float64),
-                                           np.asarray(task_caps[:, col], dtype=np.float64))
+    units = _MatchUnits.of(robot_caps, robot_payload, task_caps, task_payload)
     for i in range(n):
         model.add_exactly_one(a[i])  # Eq. 9, with the idle column as "no task"
     for j in range(m):
         for i in range(n):
             model.add_implication(a[i][j], z[j])
-        if roles is not None and roles[j]:
-            _role_slots(model, [a[i][j] for i in range(n)], z[j], amt, want[j], pay, int(need[j]), necessary_only,
-                        f"{j}")
-            continue
-        for k in np.flatnonzero(task_caps[j] > TOLERANCE):  # Eq. 10 (and additive traits)
-            holders = [a[i][j] for i in range(n) if robot_caps[i, k] > 0]
-            if not holders:
-                model.add(z[j] == 0)
-            elif binary[k] and task_caps[j, k] <= 1:
-                model.add_bool_or(holders).only_enforce_if(z[j])
-            else:
-                model.add(sum(int(amt[i, k]) * a[i][j] for i in range(n)) >= int(want[j, k])).only_enforce_if(z[j])
-        carried = sum(int(pay[i]) * a[i][j] for i in range(n))
-        model.add(carried >= int(need[j])).only_enforce_if(z[j])  # Eq. 11
-        if necessary_only:
-            _only_needed_members(model, [a[i][j] for i in range(n)], carried, pay, int(need[j]), amt,
-                                 want[j], f"{j}")
+        _cover_task(model, [a[i][j] for i in range(n)], z[j], j, robot_caps, task_caps, units, necessary_only,
+                    roles is not None and bool(roles[j]))
     scaled = np.round(r * 1e6).astype(np.int64)
     model.maximize(sum(int(scaled[i, j]) * a[i][j] for i in range(n) for j in range(m + 1)))
     solver = cp_model.CpSolver()
@@ -988,18 +967,77 @@ def exact_match(
     status = solver.solve(model)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         raise ExpertError(f"exact_match: CP-SAT returned {solver.status_name(status)}")
+    teams, wait = _read_match(solver, a)
+    return Match(teams, wait, match_reward(r, teams, wait))
+
+
+@dataclass(frozen=True)
+class _MatchUnits:
+    """The matching's amounts as CP-SAT's integers (:func:`_units`: never accepting a
+    subteam short of a need): payloads, trait amounts per robot and per task, and which
+    traits are 0/1 capabilities."""
+
+    pay: npt.NDArray[np.int64]  # (n,)
+    need: npt.NDArray[np.int64]  # (m,)
+    amt: npt.NDArray[np.int64]  # (n, K)
+    want: npt.NDArray[np.int64]  # (m, K)
+    binary: BoolArray  # (K,)
+
+    @classmethod
+    def of(cls, robot_caps: AmountArray, robot_payload: FloatArray, task_caps: AmountArray,
+           task_payload: FloatArray) -> _MatchUnits:
+        pay, need = _units(np.asarray(robot_payload, dtype=np.float64), np.asarray(task_payload, dtype=np.float64))
+        binary = np.all((robot_caps == 0) | (robot_caps == 1), axis=0)  # (K,): capabilities
+        amt = np.zeros(np.shape(robot_caps), dtype=np.int64)
+        want = np.zeros(np.shape(task_caps), dtype=np.int64)
+        for col in range(int(np.shape(robot_caps)[1])):  # each trait in integers never accepting a subteam short of it
+            amt[:, col], want[:, col] = _units(np.asarray(robot_caps[:, col], dtype=np.float64),
+                                               np.asarray(task_caps[:, col], dtype=np.float64))
+        return cls(pay, need, amt, want, binary)
+
+
+def _cover_task(model: cp_model.CpModel, member: list[cp_model.IntVar], covered: cp_model.IntVar, j: int,
+                robot_caps: AmountArray, task_caps: AmountArray, units: _MatchUnits, necessary_only: bool,
+                roles: bool) -> None:
+    """Task ``j`` (``member``: whether each robot is in its subteam) is ``covered`` only
+    by a subteam that covers it (Eqs. 10-11; with ``roles``, :func:`_role_slots`); with
+    ``necessary_only``, every member is needed."""
+    n = len(member)
+    if roles:
+        _role_slots(model, member, covered, units.amt, units.want[j], units.pay, int(units.need[j]), necessary_only,
+                    f"{j}")
+        return
+    for k in np.flatnonzero(task_caps[j] > TOLERANCE):  # Eq. 10 (and additive traits)
+        holders = [member[i] for i in range(n) if robot_caps[i, k] > 0]
+        if not holders:
+            model.add(covered == 0)
+        elif units.binary[k] and task_caps[j, k] <= 1:
+            model.add_bool_or(holders).only_enforce_if(covered)
+        else:
+            model.add(sum(int(units.amt[i, k]) * member[i] for i in range(n)) >= int(units.want[j, k])
+                      ).only_enforce_if(covered)
+    carried = sum(int(units.pay[i]) * member[i] for i in range(n))
+    model.add(carried >= int(units.need[j])).only_enforce_if(covered)  # Eq. 11
+    if necessary_only:
+        _only_needed_members(model, member, carried, units.pay, int(units.need[j]), units.amt, units.want[j], f"{j}")
+
+
+def _read_match(solver: cp_model.CpSolver, a: list[list[cp_model.IntVar]]) -> tuple[dict[int, tuple[int, ...]],
+                                                                                    tuple[int, ...]]:
+    """The solved matrix A as subteams (task column -> robot rows) and the waiting rows
+    (the last, idle, column)."""
     teams: dict[int, tuple[int, ...]] = {}
     waiting = []
-    for i in range(n):
+    for i, row in enumerate(a):
+        m = len(row) - 1
         for j in range(m + 1):
-            if solver.boolean_value(a[i][j]):
+            if solver.boolean_value(row[j]):
                 if j == m:
                     waiting.append(i)
                 else:
                     teams.setdefault(j, ())
                     teams[j] = (*teams[j], i)
-    wait = tuple(waiting)
-    return Match(teams, wait, match_reward(r, teams, wait))
+    return teams, tuple(waiting)
 
 
 def _role_slots(model: cp_model.CpModel, member: list[cp_model.IntVar], covered: cp_model.IntVar,

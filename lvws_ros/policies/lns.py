@@ -174,14 +174,8 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
             per_robot[r].append(model.new_optional_fixed_size_interval_var(start[j], dur[j], y, f"I_{r}_{j}"))
             model.add(start[j] >= int(release[r])).only_enforce_if(y)
             model.add_hint(y, r in incumbent_team[j])
-    last: dict[int, int] = {}  # robot -> its latest later task so far (per-robot order kept)
-    for j in sorted(later, key=lambda k: (by_task[inst.tasks[k].id].start, k)):
-        for r in incumbent_team[j]:
-            per_robot[r].append(model.new_fixed_size_interval_var(start[j], dur[j], f"I_{r}_{j}"))
-            model.add(start[j] >= int(release[r]))
-            if r in last:
-                model.add(start[j] >= end[last[r]])
-            last[r] = j
+    _keep_later(model, sorted(later, key=lambda k: (by_task[inst.tasks[k].id].start, k)), incumbent_team, start, end,
+                dur, release, per_robot)
     for j in free:
         for p in inst.prerequisites[j]:
             model.add(start[j] >= (end[p] if p in free else fixed_end[p]))
@@ -189,15 +183,9 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     if inst.travel is not None:  # the exact expert's travel model, from where the prefix leaves each robot
         after = state.copy()
         after.robot_site, after.robot_free_at = site, free_from
-        todo = window + later
-        h = _Horizon(todo, {j: by_task[inst.tasks[j].id].end for j in prefix}, scale, False, dur,
+        h = _Horizon(window + later, {j: by_task[inst.tasks[j].id].end for j in prefix}, scale, False, dur,
                      release.tolist(), None, {}, {}, t0, upper)
-        members = dict(member)
-        for j in later:  # their subteams fixed: members that must be there
-            members[j] = {r: model.new_constant(1) for r in incumbent_team[j]}
-        tv = _add_travel(model, inst, after, h, start, members, makespan)
-        if tv is not None:
-            _hint_travel(inst, after, model, tv, h, start, inc, {j: set(incumbent_team[j]) for j in todo})
+        _window_travel(model, inst, after, inc, h, start, member, later, incumbent_team, makespan)
     for intervals in per_robot:
         if len(intervals) > 1:
             model.add_no_overlap(intervals)
@@ -213,19 +201,53 @@ def _window_model(inst: Instance, state: State, inc: Schedule, prefix: list[int]
     out = _outside(inst, inc, prefix, free, {j: solver.value(start[j]) / scale for j in free})
     for j in free:
         t = inst.tasks[j]
-        if j in member:
-            team = [r for r, y in member[j].items() if solver.boolean_value(y)]
-            if not covers(inst.robot_amounts[team], inst.robot_payload[team], inst.task_needs[j], t.payload,
-                          bool(inst.task_roles[j])):
-                raise ExpertError(f"task {t.id!r}: the solver's subteam does not cover it (payload rounding)")
-            team = prune(team, inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload,
-                         roles=bool(inst.task_roles[j]))
-            robots = tuple(inst.robots[r].id for r in sorted(team))
-        else:
-            robots = by_task[t.id].robots
+        robots = _solved_team(inst, solver, j, member[j]) if j in member else by_task[t.id].robots
         s0 = solver.value(start[j]) / scale
         out.append(Assignment(t.id, robots, s0, s0 + t.duration))
     return left_shift(inst, Schedule.from_assignments(inst, inc.policy, out), state), closed
+
+
+def _keep_later(model: cp_model.CpModel, later: list[int], incumbent_team: dict[int, list[int]], start: dict[int, Any],
+                end: dict[int, Any], dur: dict[int, int], release: np.ndarray,
+                per_robot: list[list[cp_model.IntervalVar]]) -> None:
+    """The later tasks (in the incumbent's order of starts) keep their subteams and each
+    robot's order of them."""
+    last: dict[int, int] = {}  # robot -> its latest later task so far (per-robot order kept)
+    for j in later:
+        for r in incumbent_team[j]:
+            per_robot[r].append(model.new_fixed_size_interval_var(start[j], dur[j], f"I_{r}_{j}"))
+            model.add(start[j] >= int(release[r]))
+            if r in last:
+                model.add(start[j] >= end[last[r]])
+            last[r] = j
+
+
+def _window_travel(model: cp_model.CpModel, inst: Instance, after: State, inc: Schedule, h: _Horizon,
+                   start: dict[int, Any], member: dict[int, dict[int, cp_model.IntVar]], later: list[int],
+                   incumbent_team: dict[int, list[int]], makespan: cp_model.IntVar) -> None:
+    """The exact expert's travel model over the window (``member``: its subteams, free) and
+    the later tasks (their subteams fixed: members that must be there), from ``after``;
+    hinted with the incumbent's teams."""
+    members = dict(member)
+    for j in later:
+        members[j] = {r: model.new_constant(1) for r in incumbent_team[j]}
+    tv = _add_travel(model, inst, after, h, start, members, makespan)
+    if tv is not None:
+        _hint_travel(inst, after, model, tv, h, start, inc, {j: set(incumbent_team[j]) for j in h.todo})
+
+
+def _solved_team(inst: Instance, solver: cp_model.CpSolver, j: int, member: dict[int, cp_model.IntVar]
+                 ) -> tuple[str, ...]:
+    """Task ``j``'s subteam as the solver chose it, made inclusion-minimal (ExpertError when
+    it does not cover the task: payload rounding)."""
+    t = inst.tasks[j]
+    team = [r for r, y in member.items() if solver.boolean_value(y)]
+    if not covers(inst.robot_amounts[team], inst.robot_payload[team], inst.task_needs[j], t.payload,
+                  bool(inst.task_roles[j])):
+        raise ExpertError(f"task {t.id!r}: the solver's subteam does not cover it (payload rounding)")
+    team = prune(team, inst.robot_amounts, inst.robot_payload, inst.task_needs[j], t.payload,
+                 roles=bool(inst.task_roles[j]))
+    return tuple(inst.robots[r].id for r in sorted(team))
 
 
 def _solver(solve_by: float, work: float | None, workers: int, seed: int) -> cp_model.CpSolver | None:
@@ -466,20 +488,7 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
     state = State.initial(inst) if state is None else state
     best = left_shift(inst, incumbent, state)
     first = float(best.makespan)
-    # mostly interchangeable robots in a team past the coalition model's size: windows over pools
-    pooled = inst.num_robots > MAX_ENUMERATED and pools_apply(inst, state)
-    found = pools(inst, state) if pooled else ()
-    if window is None:
-        window = DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if inst.travel is None else DEFAULT_WINDOW_TRAVEL
-    if window < 1:
-        raise ExpertError(f"lns: the window must hold at least one task, got {window}")
-    window_cap = max(window, 2 * (DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if inst.travel is None
-                                  else DEFAULT_WINDOW_TRAVEL))
-    scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
-    later_windows = LATER if inst.travel is None else LATER_TRAVEL
-    rng = np.random.default_rng(seed)
-    weights = np.ones(len(KINDS))  # how often each kind of neighbourhood is chosen (adapted: what shortens)
-    started = {j for j in range(inst.num_tasks) if state.task_status[j] >= TaskStatus.ASSIGNED}
+    search = _Search.start(inst, state, window, seed)
     rounds = improved = 0
     deadline = t_start + time_limit
     after = 0.0  # the longest a round ran past its solve_by so far (a left shift and check after the solve, or
@@ -490,43 +499,100 @@ def improve(inst: Instance, incumbent: Schedule, *, state: State | None = None, 
         if bound is not None and best.makespan <= bound + TOLERANCE:
             break  # optimal: nothing left to shorten
         by_task = best.by_task()
-        todo = sorted((j for j in range(inst.num_tasks) if j not in started),
+        todo = sorted((j for j in range(inst.num_tasks) if j not in search.started),
                       key=lambda j: (by_task[inst.tasks[j].id].start, j))
         if not todo:
             break
-        if pooled:
-            kind = KINDS[int(rng.choice(len(KINDS), p=weights / weights.sum()))]
-        else:  # per robot, a third of the windows end the schedule, the rest from random times
-            kind = "tail" if rounds % 3 == 2 else "time"
-        prefix, picked, later = _neighbourhood(inst, best, by_task, todo, started, kind, window, later_windows,
-                                               rng, found)
-        whole = len(todo) <= window  # the whole rest fits one window: one solve says all, with all the time left
+        kind = search.kind(rounds)
+        prefix, picked, later = _neighbourhood(inst, best, by_task, todo, search.started, kind, search.window,
+                                               search.later_windows, search.rng, search.found)
+        whole = len(todo) <= search.window  # the whole rest fits one window: one solve says all, with all the time left
         solve_by = time.perf_counter() + (left if whole else min(round_limit, left))
         work = None if max_rounds is None else round_limit
         if work is not None:
             solve_by = deadline
-        if pooled:
-            cand, solved = _pool_window_model(inst, state, best, found, prefix, picked, later, scale, solve_by,
-                                              workers, seed + rounds, work)
-        else:
-            cand, solved = _window_model(inst, state, best, prefix, picked, later, scale, solve_by, workers,
-                                         seed + rounds, work)
+        cand, solved = search.solve(best, prefix, picked, later, solve_by, workers, seed + rounds, work)
         rounds += solved != NOT_RUN
-        if adaptive and solved != NOT_RUN:  # a proven neighbourhood: try a larger one; an open one: a smaller one
-            window = min(window_cap, window + 1) if solved == CLOSED else max(MIN_WINDOW, window - 1)
-
         shorter = cand is not None and _better(_score(cand), _score(best))
         if cand is not None and shorter:
-            if check_schedule(inst, cand):
-                raise ExpertError(f"lns: neighbourhood {rounds} gave an invalid schedule (a bug): "
-                                  f"{check_schedule(inst, cand)[0]}")
+            _check_round(inst, cand, rounds)
             best = cand
             improved += 1
-        if solved != NOT_RUN:  # a kind that shortens the schedule is chosen more often (never never)
-            k = KINDS.index(kind)
-            weights[k] = max(MIN_WEIGHT, (1 - REACTION) * weights[k] + REACTION * float(shorter))
+        search.learn(kind, solved, shorter, adaptive)
         after = max(after, time.perf_counter() - solve_by)
         if whole:
             break
     best.policy = incumbent.policy
-    return LNSResult(best, rounds, improved, first, time.perf_counter() - t_start, window)
+    return LNSResult(best, rounds, improved, first, time.perf_counter() - t_start, search.window)
+
+
+def _default_window(pooled: bool, travel: bool) -> int:
+    return DEFAULT_WINDOW_POOLS if pooled else DEFAULT_WINDOW if not travel else DEFAULT_WINDOW_TRAVEL
+
+
+def _check_round(inst: Instance, cand: Schedule, rounds: int) -> None:
+    """A neighbourhood's schedule is valid, or ExpertError (a bug)."""
+    if check_schedule(inst, cand):
+        raise ExpertError(f"lns: neighbourhood {rounds} gave an invalid schedule (a bug): "
+                          f"{check_schedule(inst, cand)[0]}")
+
+
+@dataclass
+class _Search:
+    """How an :func:`improve` run picks and solves its neighbourhoods: windows over pools
+    (``pooled``: mostly interchangeable robots in a team past the coalition model's size)
+    or per robot, the window that adapts to CP-SAT's proofs and the weights of the kinds of
+    neighbourhood that adapt to what shortens the schedule."""
+
+    inst: Instance
+    state: State
+    pooled: bool
+    found: tuple[Pool, ...]
+    window: int
+    window_cap: int
+    scale: int
+    later_windows: int
+    rng: np.random.Generator
+    weights: np.ndarray  # how often each kind of neighbourhood is chosen (adapted: what shortens)
+    started: set[int]
+
+    @classmethod
+    def start(cls, inst: Instance, state: State, window: int | None, seed: int) -> _Search:
+        pooled = inst.num_robots > MAX_ENUMERATED and pools_apply(inst, state)
+        found = pools(inst, state) if pooled else ()
+        default = _default_window(pooled, inst.travel is not None)
+        if window is None:
+            window = default
+        if window < 1:
+            raise ExpertError(f"lns: the window must hold at least one task, got {window}")
+        scale, _ = _time_scale(np.concatenate([inst.durations, [state.time], _travel_times(inst, state)]))
+        return cls(inst, state, pooled, found, window, max(window, 2 * default), scale,
+                   LATER if inst.travel is None else LATER_TRAVEL, np.random.default_rng(seed), np.ones(len(KINDS)),
+                   {j for j in range(inst.num_tasks) if state.task_status[j] >= TaskStatus.ASSIGNED})
+
+    def kind(self, rounds: int) -> str:
+        """The kind of the next neighbourhood: over pools drawn by the weights; per robot, a
+        third of the windows end the schedule, the rest from random times."""
+        if self.pooled:
+            return KINDS[int(self.rng.choice(len(KINDS), p=self.weights / self.weights.sum()))]
+        return "tail" if rounds % 3 == 2 else "time"
+
+    def solve(self, best: Schedule, prefix: list[int], picked: list[int], later: list[int], solve_by: float,
+              workers: int, seed: int, work: float | None) -> tuple[Schedule | None, int]:
+        """One neighbourhood's model solved: its schedule (None: none found) and NOT_RUN, OPEN or CLOSED."""
+        if self.pooled:
+            return _pool_window_model(self.inst, self.state, best, self.found, prefix, picked, later, self.scale,
+                                      solve_by, workers, seed, work)
+        return _window_model(self.inst, self.state, best, prefix, picked, later, self.scale, solve_by, workers,
+                             seed, work)
+
+    def learn(self, kind: str, solved: int, shorter: bool, adaptive: bool) -> None:
+        """After a round that ran: with ``adaptive``, a proven neighbourhood makes the window
+        larger, an open one smaller; a kind that shortens the schedule is chosen more often
+        (never never)."""
+        if solved == NOT_RUN:
+            return
+        if adaptive:
+            self.window = min(self.window_cap, self.window + 1) if solved == CLOSED else max(MIN_WINDOW, self.window - 1)
+        k = KINDS.index(kind)
+        self.weights[k] = max(MIN_WEIGHT, (1 - REACTION) * self.weights[k] + REACTION * float(shorter))

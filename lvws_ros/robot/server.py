@@ -36,18 +36,18 @@ from typing import Any
 
 from geometry_msgs.msg import Pose2D
 from lvws_msgs.action import ExecuteTask
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.exceptions import InvalidNamespaceException, InvalidNodeNameException, InvalidTopicNameException
+from rclpy.exceptions import InvalidNodeNameException, InvalidTopicNameException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.validate_namespace import validate_namespace
 from rclpy.validate_node_name import validate_node_name
 from rclpy.validate_topic_name import validate_topic_name
 
-from lvws_ros.errors import ConfigError, LvwsError, dropped_answer
+from lvws_ros.errors import ConfigError, LvwsError
+from lvws_ros.rosbase.names import check_namespace
+from lvws_ros.rosbase.spin import RCLError, spin_once
 
 __all__ = [
     "ACTION_NAME",
@@ -89,18 +89,6 @@ def action_name(robot_id: str) -> str:
         raise ConfigError(f"robot {robot_id!r}: its id cannot name a ROS action ({name!r}): use letters, "
                           "digits and '_', not starting with a digit") from None
     return name
-
-
-def check_namespace(namespace: str) -> str:
-    """``namespace`` made absolute ('' stays ''), or ConfigError naming it."""
-    if not namespace:
-        return ""
-    ns = namespace if namespace.startswith("/") else f"/{namespace}"
-    try:
-        validate_namespace(ns)
-    except InvalidNamespaceException:
-        raise ConfigError(f"namespace {namespace!r} is not a valid ROS namespace") from None
-    return ns
 
 
 class TaskFeedback:
@@ -284,17 +272,6 @@ def _result(out: Any, feedback: TaskFeedback, success: bool, message: str) -> An
     return result
 
 
-def _spin_once(executor: MultiThreadedExecutor, node: Node) -> None:
-    """One turn; a service answer the middleware would not send is logged, not fatal (as
-    in rclcpp): rclpy's action server already goes on after one of its own."""
-    try:
-        executor.spin_once(timeout_sec=SHUTDOWN_CHECK)
-    except RCLError as exc:
-        if not dropped_answer(exc) or not node.context.ok():
-            raise
-        node.get_logger().warning(f"a service answer was not sent ({exc}); the client may ask again")
-
-
 def serve(servers: Sequence[Node], threads: int | None = None) -> int:
     """Spin ``servers`` (task servers, and any other nodes) on one multi-threaded executor
     until Ctrl-C, SIGTERM or shutdown; destroy them and shut rclpy down. Two threads per
@@ -307,7 +284,7 @@ def serve(servers: Sequence[Node], threads: int | None = None) -> int:
         executor.add_node(node)
     try:
         while context.ok():  # not executor.spin(): a shutdown whose wake-up came while the executor was
-            _spin_once(executor, servers[0])  # between waits would leave it waiting for the next event
+            spin_once(servers[0], SHUTDOWN_CHECK, executor)  # between waits would leave it waiting for the next event
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RCLError:

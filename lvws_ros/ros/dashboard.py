@@ -570,13 +570,13 @@ def run(args: argparse.Namespace) -> int:
     if args.bag:
         serve(CellView.from_bag(args.bag), None, args.host, args.port, token=token, read_only=True)
         return 0
-    from lvws_ros.ros.launcher import check_namespace
     from lvws_ros.ros.world_client import join_domain
+    from lvws_ros.rosbase.names import check_namespace
 
     join_domain(args.domain_id)
 
     view = CellView()
-    feed = LiveFeed(view, check_namespace(args.namespace))
+    feed = LiveFeed(view, check_namespace(args.namespace, "--namespace"))
     try:
         serve(view, feed, args.host, args.port, token=token, read_only=args.read_only)
     finally:

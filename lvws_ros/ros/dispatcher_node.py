@@ -1,38 +1,6 @@
-"""Dispatcher node: ``ros2 run lvws_ros dispatcher --ros-args -p cell:=CELL.json`` or
-``lvws dispatcher CELL.json``, the world of a cell of real robots.
-
-It loads a cell (an ``lvws-instance/1`` file: robots, sites, speeds, homes, tasks or none
-yet), publishes its TeamState and TaskGraph for the scheduler (on every change, with one
-stamp, and every ``state_period`` seconds), and carries out each assignment by sending an
-``lvws_msgs/action/ExecuteTask`` goal to every member's ``<robot id>/execute_task`` server
-(relative names: under the node's namespace). The bookkeeping (tasks, goals, failures) is
-:class:`lvws_ros.core.dispatch.Dispatch`; this node is its shell: messages, action
-clients, services, the robots' servers and the clock (wall time, or ``/clock`` with
-``use_sim_time``).
-
-A robot is in the team once its server is up. A member that rejects or aborts its goal,
-or goes silent (no feedback for ``robot_timeout`` seconds; a free robot: its server gone
-for as long) fails the task: the other members' goals are cancelled, the task is READY
-again and the robot leaves TeamState. It comes back when its server answers again: after
-``rejoin_after`` seconds for a robot that rejected or aborted; for one that went silent,
-once a new server is up under its name (a restarted robot), its server was seen gone
-and is back, it ends its lost goal after all, or its server answers a request to cancel
-the lost goal that the goal is unknown to it or already over (:func:`free_by_answer`).
-That request goes to the action's ``cancel_goal`` service every ``robot_timeout``
-seconds while the robot is out: a goal, or its answers, can be lost on the way (DDS drops
-what is sent before both ends have matched, and rclpy's action server then forgets the
-goal), a robot still at work on its goal stays out until the goal is over, and a dead
-robot never answers, even while its server's endpoints linger. Every
-goal's events go to ``lvws/goal_events`` (lvws_msgs/GoalEvent); what the dispatcher
-refuses (an assignment naming an unknown robot or task, a busy robot) or ignores (a
-result or feedback of a goal already over) is logged and reported on ``diagnostics``
-(WARN), never fatal.
-
-Services (relative): ``submit_tasks`` (lvws_msgs/srv/SubmitInstanceTasks: tasks as the
-instance format writes them), ``cancel_task`` (CancelTask: a running task's goals are
-cancelled), ``set_robot_fault`` (SetRobotFault). With ``exit_when_done`` the node exits 0
-once every task is done (``lvws launch --robots actions``), printing a JSON summary and
-writing it to ``summary``.
+"""Dispatcher node (``lvws dispatcher CELL.json``, ``ros2 run lvws_ros dispatcher --ros-args -p cell:=CELL.json``):
+the world of a cell of real robots, the ROS shell (messages, action clients, services, clock) over
+:class:`lvws_ros.core.dispatch.Dispatch`. Read more in docs/ros.md, "Real robots: the dispatcher".
 """
 
 from __future__ import annotations

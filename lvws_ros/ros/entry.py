@@ -13,32 +13,17 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 import rclpy
-from rclpy._rclpy_pybind11 import RCLError
-from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 
-from lvws_ros.errors import LvwsError, dropped_answer
+from lvws_ros.errors import LvwsError
+from lvws_ros.rosbase.spin import RCLError, spin_once
 
 __all__ = ["node_main", "spin", "spin_once"]
 
 N = TypeVar("N", bound=Node)
 SHUTDOWN_CHECK = 0.5  # wall seconds between two looks at shutdown while nothing happens
-
-
-def spin_once(node: Node, timeout_sec: float, executor: Executor | None = None) -> None:
-    """One turn of ``executor`` (default: rclpy's global one, with ``node``); a service
-    answer the middleware would not send (:func:`~lvws_ros.errors.dropped_answer`) is
-    logged on ``node`` and the node goes on, as rclcpp does."""
-    try:
-        if executor is None:
-            rclpy.spin_once(node, timeout_sec=timeout_sec)
-        else:
-            executor.spin_once(timeout_sec=timeout_sec)
-    except RCLError as exc:
-        if not dropped_answer(exc) or not node.context.ok():
-            raise
-        node.get_logger().warning(f"a service answer was not sent ({exc}); the client may ask again")
 
 
 def spin(node: Node, until: Callable[[], bool] = lambda: False) -> int:

@@ -36,6 +36,7 @@ import yaml
 
 from lvws_ros.errors import ConfigError, LaunchError, PolicyError
 from lvws_ros.ros.topics import CLOCK_REMAP
+from lvws_ros.rosbase.names import check_namespace
 
 PR_SET_PDEATHSIG = 1
 DASHBOARD_TOKEN_ENV = "LVWS_DASHBOARD_TOKEN"  # the dashboard's token, given by the environment (never printed)
@@ -187,21 +188,6 @@ def _param(value: object) -> str:
     return str(value)
 
 
-def check_namespace(namespace: str) -> str:
-    """``namespace`` as a fully qualified ROS namespace ('' stays ''): ConfigError if invalid."""
-    if not namespace:
-        return ""
-    from rclpy.exceptions import InvalidNamespaceException
-    from rclpy.validate_namespace import validate_namespace
-
-    ns = namespace if namespace.startswith("/") else f"/{namespace}"
-    try:
-        validate_namespace(ns)
-    except InvalidNamespaceException as exc:
-        raise ConfigError(f"--namespace {namespace!r}: not a valid ROS namespace ({exc})") from None
-    return ns
-
-
 def _check_inputs(policy: str | None, model_path: str, config: str, params_file: str | None,
                   events: str | None = None, namespace: str = "") -> dict[str, Any]:
     """Every input checked before anything starts; the parameter file's scheduler values."""
@@ -325,18 +311,11 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     lvws-instance/1 file; default: the simulator's cell written as one), on wall time."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
 
-    namespace = check_namespace(namespace)
+    namespace = check_namespace(namespace, "--namespace")
     if dashboard is not None:
         check_port("127.0.0.1", dashboard)  # before anything starts
     in_file = _check_inputs(policy, model_path, config, params_file, events, namespace)
-    label = policy or str(in_file.get("policy", DEFAULT_POLICY))
-    cell = f"{namespace.strip('/').replace('/', '-')}-" if namespace else ""
-    run = name or time.strftime(f"case-study-{cell}{label}-%Y%m%d-%H%M%S")
-    bag = Path(bag_dir) / run
-    out = Path(out_dir) / run
-    if bag.exists():
-        raise LaunchError(f"{bag} already exists")
-    out.mkdir(parents=True, exist_ok=True)
+    run, bag, out = _run_dirs(name, namespace, policy or str(in_file.get("policy", DEFAULT_POLICY)), bag_dir, out_dir)
     summary_path = out / "summary.json"
     gif_path = out / "run.gif"
     commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
@@ -370,10 +349,31 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
             signal.signal(s, h)
     log(f"  [{time.monotonic() - t0:5.1f} s] the run is over: stopping the other nodes (the recorder closes the bag)")
     codes = stop(children)
+    summary = _complete_summary(summary_path, t0, codes)
+    return LaunchResult(bag, out, summary, gif_path if gif_path.is_file() else None, codes)
+
+
+def _run_dirs(name: str | None, namespace: str, label: str, bag_dir: str | Path, out_dir: str | Path
+              ) -> tuple[str, Path, Path]:
+    """The run's name (default: the case study, the cell's namespace, the policy's ``label``
+    and the time), its bag (LaunchError if it exists) and its output folder (made)."""
+    cell = f"{namespace.strip('/').replace('/', '-')}-" if namespace else ""
+    run = name or time.strftime(f"case-study-{cell}{label}-%Y%m%d-%H%M%S")
+    bag = Path(bag_dir) / run
+    out = Path(out_dir) / run
+    if bag.exists():
+        raise LaunchError(f"{bag} already exists")
+    out.mkdir(parents=True, exist_ok=True)
+    return run, bag, out
+
+
+def _complete_summary(summary_path: Path, t0: float, codes: dict[str, int | None]) -> dict[str, Any]:
+    """The summary the world wrote (none: empty), with the run's wall seconds since ``t0``
+    (monotonic) and the children's exit codes added, written back."""
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
     summary.update({"wall_seconds_total": time.monotonic() - t0, "exit_codes": codes})
     summary_path.write_text(json.dumps(summary, indent=1))
-    return LaunchResult(bag, out, summary, gif_path if gif_path.is_file() else None, codes)
+    return summary
 
 
 def _wait_for_line(child: Child, text: str, timeout: float, interrupted: list[int]) -> None:

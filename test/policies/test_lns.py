@@ -21,7 +21,7 @@ from lvws_ros.core.formats import instance_from_dict, load_schedule, save_schedu
 from lvws_ros.core.importers import import_psplib
 from lvws_ros.core.schedule import Assignment, Schedule, check_schedule
 from lvws_ros.errors import ExpertError
-from lvws_ros.learning.auto import AutoPolicy
+from lvws_ros.planning.budgeted import AutoPolicy
 from lvws_ros.policies import lns
 from lvws_ros.policies.baselines import GreedyPayloadPolicy, RandomPolicy
 from lvws_ros.policies.exact import _time_scale, _travel_times, left_shift, solve_exact

@@ -14,7 +14,7 @@ from lvws_ros.core.datasets import DATASETS, dataset_instance, random_instance
 from lvws_ros.core.executor import State, advance, check_decision, simulate
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import PolicyError
-from lvws_ros.learning.auto import AutoPolicy
+from lvws_ros.planning.budgeted import AutoPolicy
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 from lvws_ros.policies.exact import solve_exact
 from lvws_ros.registry import make_policy
@@ -96,7 +96,7 @@ def test_after_searches_that_do_not_pay_auto_follows_its_plan_between_fewer_sear
     search (1, 2, 4, ... between searches); the run stays valid and never worse than its
     quick plan, and every step with a search still decides within its budget's reach."""
     from lvws_ros.core.families import family_instance
-    from lvws_ros.learning.auto import SEARCH_PATIENCE
+    from lvws_ros.planning.budgeted import SEARCH_PATIENCE
 
     inst = family_instance("depot", 0, 0, num_robots=12, num_tasks=60)
     auto = AutoPolicy(budget_ms=200.0, workers=1)

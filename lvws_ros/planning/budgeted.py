@@ -1,4 +1,5 @@
-"""The ``auto`` policy: the best schedule it can find within the decision budget.
+"""The ``auto`` policy within a budget per decision (``--budget-ms``): the best schedule it
+can find within each decision step's budget (the whole-run planner is :mod:`lvws_ros.planning.auto`).
 
 A user should not need to know which policy suits which cell. At a decision step with no
 plan to follow, ``auto``
