@@ -19,7 +19,7 @@ READY_WAIT seconds more). If the planner's
   process dies, the decision is GRP's, a notice says so (the node puts it on
   ``diagnostics`` as a WARN) and the process is started again.
 
-The per-decision search of :class:`~lvws_ros.learning.auto.AutoPolicy` (a budget of
+The per-decision search of :class:`~lvws_ros.planning.budgeted.AutoPolicy` (a budget of
 ``budget_ms`` per decision, searched from each decision's state) stays what ``auto`` is
 when a budget is given.
 """

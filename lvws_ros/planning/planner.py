@@ -82,6 +82,7 @@ AHEAD_NOISE = 0.5  # "departure": "each": noise on the list schedules' keys, in 
 AHEAD_SAMPLES = 20  # list schedules of one such round when rounds are counted
 GRP_NOISE = 0.5  # randomized GRP rounds: noise on the critical-path keys, in mean task durations (not tuned)
 GRP_SAMPLES = 4  # randomized GRP schedules of one round when rounds are counted
+GRP_ROUND = 3  # offline, a round of randomized GRP has time for this many where one takes longer than a slice
 PROBE_DECISIONS = 3  # decision steps of a quick plan timed to estimate what it costs on the cell
 PROBE_SECONDS = 0.5  # a probe stops after this long even with fewer decision steps
 PROJECT_AFTER = 1.0  # seconds into a quick plan before its finish is projected from its progress
@@ -173,6 +174,7 @@ class Planner:
         self.counted = False  # rounds counted, not timed (deterministic)
         self.quick_makespan = math.nan  # the best quick plan's, from the latest state they were made from
         self.quick: dict[str, tuple[float, float]] = {}  # each quick plan's (makespan, seconds), latest made
+        self.quick_at: dict[str, float] = {}  # when each was made, in seconds since the planner started
         self.quick_cost: dict[str, float] = {}  # each quick plan's probed seconds per task to do, on this cell
         self.overrun, self.fallback = 0.0, ""  # the first quick plan finished past the deadline (by, which)
         self.started = time.perf_counter()
@@ -330,6 +332,7 @@ class Planner:
             self.round_cost.add(len(state.tasks_to_do()), 1, self.lvws_seconds)
         res = self._ahead(state, res)
         self.quick[name] = (float(res.schedule.makespan), time.perf_counter() - t0)
+        self.quick_at[name] = time.perf_counter() - self.started
         return res
 
     def _ahead_plans(self, state: State, deadline: float | None) -> None:
@@ -384,7 +387,7 @@ class Planner:
         elif self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
             shorter = self._sample(state, todo, end)
         elif self.rounds % SAMPLE_EVERY == 0 and not self._whole(todo):
-            shorter = self._sample_grp(state, end)
+            shorter = self._sample_grp(state, self._grp_round_end(end, deadline))
         elif self._whole(todo) and not self.exact_closed and (self.exact_rounds <= self.lns_rounds or self.exact_shortened):
             shorter = self._exact(state, end, deadline)
         else:  # a larger rest, or every other round on a small one (CP-SAT's whole model may find nothing there)
@@ -492,6 +495,15 @@ class Planner:
         if best is None or best.makespan >= self.plan.makespan - TOLERANCE:
             return False
         return self.offer_schedule(best, "sample")
+
+    def _grp_round_end(self, end: float, deadline: float | None) -> float:
+        """When a round of randomized GRP ends: with a deadline (offline, nothing else to
+        hear), long enough for GRP_ROUND of them where one takes longer than a slice (a
+        fleet cell); otherwise at the round's ``end``."""
+        if deadline is None or self.open_ended:
+            return end
+        one = self.quick.get("grp-critical-path", (0.0, 0.0))[1]
+        return max(end, min(deadline, time.perf_counter() + GRP_ROUND * one))
 
     def _sample_grp(self, state: State, end: float) -> bool:
         """A round of randomized GRP list schedules (critical-path keys with GRP_NOISE
