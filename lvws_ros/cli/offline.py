@@ -20,6 +20,28 @@ from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES
 
 
 
+def _print_auto(policy: Any, args: argparse.Namespace) -> None:
+    """What ``auto`` did: the planner's report (its quick plans, improvers, proof and any
+    overrun), or the per-decision search's counts (with ``--budget-ms``)."""
+    report = getattr(policy, "report", None)
+    if report is None:
+        improved = getattr(policy, "improved", {})
+        print(f"auto: quick plan {getattr(policy, 'quick_makespan', float('nan')):g}, improved by a quick plan "
+              f"made later {improved.get('quick', 0)}, by CP-SAT {improved.get('exact', 0)}, "
+              f"by large-neighbourhood search {improved.get('lns', 0)} and by sampling "
+              f"{improved.get('sample', 0)} times; "
+              f"{'proven optimal' if getattr(policy, 'proven', False) else 'not proven optimal'}; seed {args.seed}",
+              file=sys.stderr)
+        return
+    improved, quick = report.improved, getattr(policy, "quick_makespan", float("nan"))
+    print(f"auto: planned {report.seconds:.1f} s ({report.rounds} improvement rounds): quick plan "
+          f"{quick:g}, final plan {report.makespan:g} by {report.source}, improved by CP-SAT "
+          f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)} and by "
+          f"sampling {improved.get('sample', 0) + improved.get('grp-sample', 0)} times; "
+          f"{'proven optimal' if report.proven else 'not proven optimal'}; seed {args.seed}", file=sys.stderr)
+    _print_quick_plans(policy, report, args.time_limit)
+
+
 def _print_quick_plans(policy: Any, report: Any, limit: float) -> None:
     """``auto``'s quick plans as they finished (cheapest first on the cell), and by how much
     the limit was overrun when none had finished by it (the cheapest is finished anyway)."""
@@ -105,22 +127,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
               "was spent before any schedule was found)", file=sys.stderr)
     if args.policy == "lvws_sample":
         print(f"lvws_sample: seed {args.seed}", file=sys.stderr)
-    if args.policy == "auto" and (report := getattr(policy, "report", None)) is not None:
-        improved, quick = report.improved, getattr(policy, "quick_makespan", float("nan"))
-        print(f"auto: planned {report.seconds:.1f} s ({report.rounds} improvement rounds): quick plan "
-              f"{quick:g}, final plan {report.makespan:g} by {report.source}, improved by CP-SAT "
-              f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)} and by "
-              f"sampling {improved.get('sample', 0) + improved.get('grp-sample', 0)} times; "
-              f"{'proven optimal' if report.proven else 'not proven optimal'}; seed {args.seed}", file=sys.stderr)
-        _print_quick_plans(policy, report, args.time_limit)
-    elif args.policy == "auto":
-        improved = getattr(policy, "improved", {})
-        print(f"auto: quick plan {getattr(policy, 'quick_makespan', float('nan')):g}, improved by a quick plan "
-              f"made later {improved.get('quick', 0)}, by CP-SAT {improved.get('exact', 0)}, "
-              f"by large-neighbourhood search {improved.get('lns', 0)} and by sampling "
-              f"{improved.get('sample', 0)} times; "
-              f"{'proven optimal' if getattr(policy, 'proven', False) else 'not proven optimal'}; seed {args.seed}",
-              file=sys.stderr)
+    if args.policy == "auto":
+        _print_auto(policy, args)
     if args.noise is not None:
         from lvws_ros.sim.instance_world import run_noisy
 

@@ -1,41 +1,7 @@
-"""The planner: one whole plan from the current state, made at once and improved while
-there is time.
-
-:class:`Planner` holds an incumbent plan (a whole schedule from its state, carried out by
-:class:`~lvws_ros.planning.follow.PlanFollower`) and improves it in rounds:
-
-1. **quick plans** from the state: GRP in critical-path order, GRP, LVWS (each a whole
-   schedule; each within the deadline, in that order: the cheapest first), and where robots
-   set out on their own (``"departure": "each"``) those three carried out so and two list
-   schedules of the robots that can be there soonest (:mod:`~lvws_ros.planning.ahead`);
-   the shortest is the incumbent;
-2. **improvement rounds**, in turn: while at most ``exact_tasks`` tasks are left to do
-   (POOL_EXACT_TASKS where the whole model is the pool model), CP-SAT on the whole rest,
-   warm-started from the incumbent, in slices that double from EXACT_FIRST (a proof of
-   optimality ends the improvement), every other round, or the next round too when its
-   last slice shortened the plan; the other
-   rounds, and every round on a larger rest, large-neighbourhood search on the incumbent
-   (:func:`~lvws_ros.policies.lns.improve`, travel and the way home included; its window
-   adapts to what CP-SAT proves in a round's time and is kept from round to round) for a
-   slice of time (a whole model of a few tens of tasks and robots with travel can be too
-   large for CP-SAT to shorten anything, where its neighbourhoods still do); and every
-   third round, when LVWS's quick plan fitted in a slice, a round of LVWS sampling
-   (:func:`~lvws_ros.learning.sampling.sample_schedules`) at a temperature that shrinks
-   with the tasks to do (:func:`sampling_temperature`: a hot sample of 500 tasks is worse
-   than LVWS's own).
-
-Every candidate is carried out by the executor from the plan's state
-(:func:`~lvws_ros.planning.follow.repair`, Eqs. 8-11 checked at every step) and replaces
-the incumbent only when shorter: the plan never gets longer, except when the world does
-(:meth:`Planner.rebase` on an event). :meth:`Planner.report` gives the plan's makespan,
-the lower bound (:func:`~lvws_ros.core.bounds.lower_bounds`, or CP-SAT's where it is
-stronger) and the gap; it stops when the plan is proven optimal, or when PATIENCE rounds
-in a row gave nothing once CP-SAT closed its whole model of a small rest (PATIENCE_LARGE otherwise;
-:attr:`Planner.exhausted`), until the world departs from the plan.
-With ``iterations`` instead of a time limit (:meth:`Planner.run`),
-every solver call is limited by CP-SAT's deterministic time on one worker and sampling
-rounds have a fixed size: the same seed gives the same plan on every run.
-"""
+"""The planner: one whole plan from the current state, made at once (quick plans, the
+cheapest on the cell first) and improved in rounds while there is time (CP-SAT, neighbourhoods,
+sampling); the plan never gets longer unless the world does. The story, step by step:
+``docs/architecture.md``, "The planner"."""
 
 from __future__ import annotations
 
@@ -43,6 +9,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -81,13 +48,32 @@ TEMPERATURE_TASKS = 20  # sampling_temperature: the default temperature up to th
 AHEAD_NOISE = 0.5  # "departure": "each": noise on the list schedules' keys, in mean task durations (not tuned)
 AHEAD_SAMPLES = 20  # list schedules of one such round when rounds are counted
 GRP_NOISE = 0.5  # randomized GRP rounds: noise on the critical-path keys, in mean task durations (not tuned)
+GRP_INDEX_WEIGHT = 2.0  # randomized GRP rounds: the listed order blended in with a weight drawn in [0, this] (not tuned)
 GRP_SAMPLES = 4  # randomized GRP schedules of one round when rounds are counted
 GRP_ROUND = 3  # offline, a round of randomized GRP has time for this many where one takes longer than a slice
 PROBE_DECISIONS = 3  # decision steps of a quick plan timed to estimate what it costs on the cell
 PROBE_SECONDS = 0.5  # a probe stops after this long even with fewer decision steps
 PROJECT_AFTER = 1.0  # seconds into a quick plan before its finish is projected from its progress
+PROJECT_MARGIN = 3.0  # a quick plan is given up once it projects this many times the time it had
 
-__all__ = ["EXACT_TASKS", "Plan", "PlanReport", "Planner", "sampling_temperature"]
+__all__ = ["EXACT_TASKS", "Clock", "ExactState", "Plan", "PlanReport", "Planner", "sampling_temperature"]
+
+
+class Clock(Enum):
+    """How a planner's time is kept."""
+
+    DEADLINE = "deadline"  # offline: it plans up to a deadline (Planner.run with a time limit)
+    OPEN_ENDED = "open-ended"  # beside a node: it improves until told otherwise, a slice at a time
+    COUNTED = "counted"  # rounds counted, not timed: the same seed gives the same plan
+
+
+class ExactState(Enum):
+    """What CP-SAT's whole model has done from the plan's state."""
+
+    OPEN = "open"  # worth a round when its turn comes
+    SHORTENING = "shortening"  # its last slice shortened the plan: the next round is its too (a longer slice)
+    CLOSED = "closed"  # it proved its model's optimum: solving it again gives nothing new
+    OVERRAN = "overran"  # it took far longer than its slice and shortened nothing (too large): LNS instead
 
 
 def sampling_temperature(todo: int, base: float = DEFAULT_TEMPERATURE) -> float:
@@ -100,10 +86,11 @@ def sampling_temperature(todo: int, base: float = DEFAULT_TEMPERATURE) -> float:
 
 class Projected(Until):
     """``policy`` within ``deadline`` (:class:`~lvws_ros.learning.policies.Until`) that also
-    gives up (OutOfTime) once, PROJECT_AFTER seconds in, the finish its progress projects
-    (seconds so far over the share of the tasks started) is past the deadline: a quick plan
-    far too slow for the time left does not take all of it. A run's first steps start the
-    most tasks, so the projection errs early."""
+    gives up (OutOfTime) once, PROJECT_AFTER seconds in, the time its progress projects
+    (seconds so far over the share of the tasks started) is over PROJECT_MARGIN times the
+    time it had: a quick plan far too slow for the time left does not take all of it. The
+    margin allows for runs whose first steps start few tasks (a deep graph), where the
+    projection errs late."""
 
     def __init__(self, policy: Policy, deadline: float, state: State) -> None:
         super().__init__(policy, deadline)
@@ -114,7 +101,7 @@ class Projected(Until):
         spent = time.perf_counter() - self.began
         if spent > PROJECT_AFTER:
             started = self.todo - int((state.task_status == TaskStatus.QUEUED).sum())
-            if started <= 0 or self.began + spent * self.todo / started > self.deadline:
+            if spent * self.todo > PROJECT_MARGIN * (self.deadline - self.began) * max(started, 0):
                 raise OutOfTime
         return super().decide(state)
 
@@ -156,24 +143,22 @@ class Planner:
         self._lvws: LVWSPolicy | None = None
         self.plan: Plan | None = None
         self.proven = False
-        self.exact_closed = False  # CP-SAT proved its model's optimum from the plan's state
+        self.exact = ExactState.OPEN  # CP-SAT's whole model from the plan's state
         self.exact_rounds = 0  # CP-SAT solves from the plan's state
         self.lns_rounds = 0  # LNS rounds from the plan's state
-        self.exact_overran = False  # CP-SAT's whole model took far longer than its slice (too large: LNS instead)
-        self.exact_shortened = False  # its last slice shortened the plan: the next round is its too (a longer slice)
         self.unimproved = 0  # improvement rounds in a row that did not shorten the plan
         self.lns_window: int | None = None  # the neighbourhood size LNS adapted to last (None: its default)
         self._pooled: bool | None = None  # the cell's whole model is the pool model (None: not asked yet)
-        self.open_ended = False  # improving until told otherwise (a process beside a node), not to a deadline
+        self.clock = Clock.DEADLINE
         self.bound = self.base_bound = 0.0  # the plan's lower bound; the cell's (lower_bounds)
         self.rounds = 0
         self.improved: dict[str, int] = {}
         self.rng = np.random.default_rng(seed)
         self.round_cost = RoundCost()
         self.lvws_seconds = math.inf  # what LVWS's quick plan took last (sampling costs as much per schedule)
-        self.counted = False  # rounds counted, not timed (deterministic)
         self.quick_makespan = math.nan  # the best quick plan's, from the latest state they were made from
         self.quick: dict[str, tuple[float, float]] = {}  # each quick plan's (makespan, seconds), latest made
+        self.record: dict[str, tuple[int, int]] = {}  # improver -> (rounds, rounds that shortened the plan), this cell
         self.quick_at: dict[str, float] = {}  # when each was made, in seconds since the planner started
         self.quick_cost: dict[str, float] = {}  # each quick plan's probed seconds per task to do, on this cell
         self.overrun, self.fallback = 0.0, ""  # the first quick plan finished past the deadline (by, which)
@@ -184,6 +169,11 @@ class Planner:
             ("grp", GreedyPayloadPolicy)]
         if learned:
             self._quick.append(("lvws", self.lvws))
+
+    @property
+    def counted(self) -> bool:
+        """Rounds counted, not timed (deterministic)."""
+        return self.clock is Clock.COUNTED
 
     def lvws(self) -> LVWSPolicy:
         """The LVWS policy (loaded once, on first use)."""
@@ -238,7 +228,7 @@ class Planner:
             self.base_bound = lower_bounds(state.instance).best
             self.lns_window = None
             self._pooled = None
-            self.quick_cost = {}
+            self.quick_cost, self.record = {}, {}
         self.plan = None
         if old is not None:
             try:
@@ -248,8 +238,7 @@ class Planner:
         due = self.plan is None or old is None or new_cell or self.plan.makespan > old.makespan + TOLERANCE
         if due:  # the world departed from the plan: CP-SAT's bound and proofs no longer hold, the search starts over
             self.proven, self.bound = False, self.base_bound
-            self.exact_closed, self.exact_rounds, self.lns_rounds, self.unimproved = False, 0, 0, 0
-            self.exact_overran = self.exact_shortened = False
+            self.exact, self.exact_rounds, self.lns_rounds, self.unimproved = ExactState.OPEN, 0, 0, 0
         if due and quick:
             self.quick_plans(state, deadline)
         if self.plan is None:  # nothing yet: the cheapest quick plan, however long it takes
@@ -386,15 +375,29 @@ class Planner:
             shorter = self._sample_ahead(state, end)
         elif self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
             shorter = self._sample(state, todo, end)
-        elif self.rounds % SAMPLE_EVERY == 0 and not self._whole(todo):
+        elif not self._whole(todo) and (self.rounds % SAMPLE_EVERY == 0 or self._rate("grp-sample") > self._rate("lns")):
             shorter = self._sample_grp(state, self._grp_round_end(end, deadline))
-        elif self._whole(todo) and not self.exact_closed and (self.exact_rounds <= self.lns_rounds or self.exact_shortened):
+            self._tried("grp-sample", shorter)
+        elif self._whole(todo) and self.exact in (ExactState.OPEN, ExactState.SHORTENING) \
+                and (self.exact_rounds <= self.lns_rounds or self.exact is ExactState.SHORTENING):
             shorter = self._exact(state, end, deadline)
         else:  # a larger rest, or every other round on a small one (CP-SAT's whole model may find nothing there)
             self.lns_rounds += 1
             shorter = self._lns(state, end)
+            self._tried("lns", shorter)
         self.unimproved = 0 if shorter else self.unimproved + 1
         return shorter
+
+    def _tried(self, improver: str, shorter: bool) -> None:
+        tries, wins = self.record.get(improver, (0, 0))
+        self.record[improver] = (tries + 1, wins + int(shorter))
+
+    def _rate(self, improver: str) -> float:
+        """How often ``improver``'s rounds shortened the plan on this cell (Laplace's rule):
+        on a rest too large for CP-SAT's whole model, randomized GRP takes the rounds
+        between its own while it does better than the neighbourhoods."""
+        tries, wins = self.record.get(improver, (0, 0))
+        return (wins + 1) / (tries + 2)
 
     @property
     def exhausted(self) -> bool:
@@ -405,7 +408,7 @@ class Planner:
         whole model CP-SAT has not closed, or one too large to build in its slice)."""
         if self.proven or self.plan is None:
             return self.proven
-        small = self._whole(len(self.plan.state.tasks_to_do())) and self.exact_closed and not self.exact_overran
+        small = self._whole(len(self.plan.state.tasks_to_do())) and self.exact is ExactState.CLOSED
         return self.unimproved >= (PATIENCE if small else PATIENCE_LARGE)
 
     def _whole(self, todo: int) -> bool:
@@ -432,7 +435,7 @@ class Planner:
         # warm-started from the plan: up to the deadline, or (a planner without one) up to a round's end
         if self.counted:  # CP-SAT's deterministic time alone decides
             left = math.inf
-        elif deadline is not None and not self.open_ended:
+        elif deadline is not None and self.clock is Clock.DEADLINE:
             left = min(deadline - time.perf_counter(), EXACT_FIRST * 2 ** self.exact_rounds)
         else:
             left = min(end - time.perf_counter(), EXACT_FIRST * 2 ** self.exact_rounds)
@@ -448,12 +451,11 @@ class Planner:
         if res.schedule is None:
             return False
         shorter = self.offer_schedule(res.schedule, "exact")
-        self.exact_shortened = shorter
-        # optimal in CP-SAT's model: solving it again gives nothing new; or a model that took far
-        # longer than its slice to build and shortened nothing (e.g. 20 robots x 50 tasks with
-        # travel: seconds to build): its rounds go to LNS from here on
-        self.exact_overran = left < math.inf and time.perf_counter() - began > 2 * left + EXACT_FIRST and not shorter
-        self.exact_closed = res.proven or self.exact_overran
+        # a model that took far longer than its slice to build and shortened nothing (e.g. 20
+        # robots x 50 tasks with travel: seconds to build): its rounds go to LNS from here on
+        overran = left < math.inf and time.perf_counter() - began > 2 * left + EXACT_FIRST and not shorter
+        self.exact = ExactState.OVERRAN if overran else ExactState.CLOSED if res.proven else \
+            ExactState.SHORTENING if shorter else ExactState.OPEN
         if res.proven and proves_executor_bound(state.instance, res) \
                 and abs(float(res.schedule.makespan) - self.plan.makespan) <= TOLERANCE:
             self.proven = True
@@ -500,7 +502,7 @@ class Planner:
         """When a round of randomized GRP ends: with a deadline (offline, nothing else to
         hear), long enough for GRP_ROUND of them where one takes longer than a slice (a
         fleet cell); otherwise at the round's ``end``."""
-        if deadline is None or self.open_ended:
+        if deadline is None or self.clock is Clock.OPEN_ENDED:
             return end
         one = self.quick.get("grp-critical-path", (0.0, 0.0))[1]
         return max(end, min(deadline, time.perf_counter() + GRP_ROUND * one))
@@ -517,7 +519,7 @@ class Planner:
             return False  # one run does not fit in the round
         while (time.perf_counter() < end) if not self.counted else made < GRP_SAMPLES:
             policy = GreedyPayloadPolicy(seed=int(self.rng.integers(2**31)), priority="critical-path",
-                                         noise=GRP_NOISE)
+                                         noise=GRP_NOISE, index_weight=float(self.rng.uniform(0, GRP_INDEX_WEIGHT)))
             made += 1
             try:
                 res = simulate(state.instance, policy if self.counted else Until(policy, end), state=state)
@@ -562,7 +564,10 @@ class Planner:
         if time_limit is None and iterations is None:
             raise PolicyError("planner: give a time limit or a number of iterations")
         self.started = time.perf_counter()
-        self.counted = iterations is not None and time_limit is None
+        if iterations is not None and time_limit is None:
+            self.clock = Clock.COUNTED
+        elif self.clock is Clock.COUNTED:
+            self.clock = Clock.DEADLINE
         deadline = None if time_limit is None else self.started + time_limit
         self.rebase(state, deadline)
         if on_report is not None:

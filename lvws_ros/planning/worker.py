@@ -36,7 +36,7 @@ import numpy as np
 from lvws_ros.core.executor import State
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Schedule
-from lvws_ros.planning.planner import Planner, PlanReport
+from lvws_ros.planning.planner import Clock, Planner, PlanReport
 
 QUICK_SECONDS = 60.0  # the child's quick plans from one state: at most this long in all
 PARENT_CHECK = 1.0  # seconds between the child's looks at whether its parent is still there
@@ -67,7 +67,7 @@ def _state(inst: Instance, p: StatePayload) -> State:
 def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], parent: int) -> None:
     """The child's loop (module docstring)."""
     planner = Planner(**options)
-    planner.open_ended = True
+    planner.clock = Clock.OPEN_ENDED
     if planner.learned:
         planner.lvws()  # the model loaded before the first state comes
     outbox.send(("ready",))

@@ -47,6 +47,7 @@ large-neighbourhood search built on it) are the only ones that import OR-Tools.
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -795,18 +796,9 @@ def solve_exact(
     h = _horizon(inst, state, todo, hint, coalitions=formulation in ("auto", "coalition"))
     if formulation == "auto" and h.teams is None and pools_apply(inst, state):
         formulation = "pool"  # the horizon without coalitions is the pool model's
-    if formulation == "pool":
-        found = pools(inst, state)
-        pm = _build_pool_model(inst, h, found, h.ticks(state.time))
-        _hint_pools(inst, h, pm, found, hint)
-        model, name = pm.model, "pool"
-    else:
-        m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
-        tv = _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
-        teams = _add_hint(inst, h, m, hint, starts=tv is None)
-        if tv is not None:
-            _hint_travel(inst, state, m.model, tv, h, m.start, hint, teams)
-        model, name = m.model, "coalition" if h.teams is not None else "boolean"
+    m, found = _hinted_model(inst, state, h, hint, formulation)
+    model, name = m.model, "pool" if isinstance(m, _PoolModel) else "coalition" if h.teams is not None else "boolean"
+    _slot_cumulatives(model, inst, state, h, m.start)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
     solver.parameters.num_workers = workers
@@ -823,13 +815,74 @@ def solve_exact(
         raise ExpertError(f"CP-SAT proved the model infeasible for {inst.name!r}; the hint schedule contradicts it")
     if not found_one:
         return ExpertResult(hint, "unknown", hint.makespan, bound, seconds, h.exact_scale, name)
-    sched = _pool_solution(inst, state, h, pm, found, solver) if name == "pool" else _solution(inst, state, h, m, solver)
+    sched = _pool_solution(inst, state, h, m, found, solver) if isinstance(m, _PoolModel) else \
+        _solution(inst, state, h, m, solver)
     # With rounded durations (no exact scale) the real-time schedule is valid, not proven optimal.
     status = "optimal" if code == cp_model.OPTIMAL and h.exact_scale else "feasible"
     if status == "optimal":
         bound = sched.makespan
     sched.compute_seconds = seconds
     return ExpertResult(sched, status, sched.makespan, min(bound, sched.makespan), seconds, h.exact_scale, name)
+
+
+def _hinted_model(inst: Instance, state: State, h: _Horizon, hint: Schedule,
+                  formulation: str) -> tuple[_Model | _PoolModel, list[Pool]]:
+    """The model of ``formulation`` ("pool", or the coalition or boolean one the horizon
+    holds), travel added, hinted with ``hint``; with the pools it is over (none but in the
+    pool model)."""
+    if formulation == "pool":
+        found = pools(inst, state)
+        pm = _build_pool_model(inst, h, found, h.ticks(state.time))
+        _hint_pools(inst, h, pm, found, hint)
+        return pm, list(found)
+    m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
+    tv = _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
+    teams = _add_hint(inst, h, m, hint, starts=tv is None)
+    if tv is not None:
+        _hint_travel(inst, state, m.model, tv, h, m.start, hint, teams)
+    return m, []
+
+
+SLOT_CUMULATIVES = True  # the redundant cumulatives of the multi-skill rule (False: the models without them)
+SLOT_SUBSETS = 5  # with roles, a redundant cumulative per subset of the needed traits up to this many (else each alone)
+
+
+def _slot_cumulatives(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon,
+                      start: dict[int, cp_model.IntVar]) -> None:
+    """Redundant cumulatives of the multi-skill rule (roles: a member fills one slot), on the
+    tasks' intervals with fixed demands: for a set S of required traits, a task takes at least
+    the members its S-slots need (the sum over S of each need over the largest amount a robot
+    has; without roles the largest of those, one robot may fill several), all of them robots
+    holding a trait of S, of which there are as many as the capacity (a busy one holds its
+    unit until it is free). Every subset of up to SLOT_SUBSETS needed traits (each alone and
+    all together beyond), one per distinct set of holders (the largest S). Only when a task
+    left has roles: the other models are left as they were."""
+    roles = inst.task_roles
+    if not SLOT_CUMULATIVES or not any(roles[j] for j in h.todo):
+        return
+    needs, amounts = inst.task_needs, inst.robot_amounts
+    cols = [int(c) for c in np.flatnonzero((needs[h.todo] > TOLERANCE).any(axis=0))]
+    most = amounts.max(axis=0)
+    slots = {j: np.where(needs[j] > TOLERANCE, np.ceil((needs[j] - TOLERANCE) / np.maximum(most, TOLERANCE)), 0)
+             for j in h.todo}
+    sets = [s for k in range(len(cols), 0, -1) for s in itertools.combinations(cols, k)] \
+        if len(cols) <= SLOT_SUBSETS else [*((c,) for c in cols), tuple(cols)]
+    seen: set[tuple[int, ...]] = set()
+    now = h.ticks(state.time)
+    intervals = {j: model.new_fixed_size_interval_var(start[j], h.dur[j], f"slots_{j}") for j in h.todo}
+    for subset in sets:
+        holders = tuple(int(r) for r in np.flatnonzero((amounts[:, list(subset)] > 0).any(axis=1)))
+        if holders in seen:
+            continue
+        seen.add(holders)
+        demand = {j: int(slots[j][list(subset)].sum() if roles[j] else slots[j][list(subset)].max()) for j in h.todo}
+        users = [j for j in h.todo if demand[j] > 0]
+        busy = [r for r in holders if h.free_at[r] > now]
+        if sum(demand[j] for j in users) + len(busy) <= len(holders):
+            continue  # never binding
+        model.add_cumulative([intervals[j] for j in users] +
+                             [model.new_fixed_size_interval_var(now, h.free_at[r] - now, f"held_{r}") for r in busy],
+                             [demand[j] for j in users] + [1] * len(busy), len(holders))
 
 
 def _demand(model: cp_model.CpModel, values: list[int], choice: Sequence[cp_model.IntVar], name: str) -> cp_model.IntVar:

@@ -18,7 +18,7 @@ from lvws_ros.core.importers import import_psplib
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.planning.follow import PlanFollower, repair
-from lvws_ros.planning.planner import Planner, sampling_temperature
+from lvws_ros.planning.planner import ExactState, Planner, sampling_temperature
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 from lvws_ros.policies.exact import solve_exact
 
@@ -204,12 +204,12 @@ def test_cp_sat_keeps_the_next_round_while_its_slices_shorten_the_plan():
     inst = import_psplib(Path(__file__).parents[2] / "examples" / "psplib" / "j1201_1.sm")
     planner = Planner(seed=0, workers=1, learned=False, work=0.5)
     planner.run(State.initial(inst), iterations=1)
-    assert (planner.exact_rounds, planner.lns_rounds) == (1, 0) and planner.exact_shortened
-    while planner.exact_shortened and planner.exact_rounds < 4:
+    assert (planner.exact_rounds, planner.lns_rounds) == (1, 0) and planner.exact is ExactState.SHORTENING
+    while planner.exact is ExactState.SHORTENING and planner.exact_rounds < 4:
         rounds = planner.exact_rounds
         planner.improve()
         assert (planner.exact_rounds, planner.lns_rounds) == (rounds + 1, 0)
-    if not planner.exact_shortened:
+    if planner.exact is not ExactState.SHORTENING:
         planner.improve()
         assert planner.lns_rounds == 1
 
