@@ -48,7 +48,6 @@ TEMPERATURE_TASKS = 20  # sampling_temperature: the default temperature up to th
 AHEAD_NOISE = 0.5  # "departure": "each": noise on the list schedules' keys, in mean task durations (not tuned)
 AHEAD_SAMPLES = 20  # list schedules of one such round when rounds are counted
 GRP_NOISE = 0.5  # randomized GRP rounds: noise on the critical-path keys, in mean task durations (not tuned)
-GRP_INDEX_WEIGHT = 2.0  # randomized GRP rounds: the listed order blended in with a weight drawn in [0, this] (not tuned)
 GRP_SAMPLES = 4  # randomized GRP schedules of one round when rounds are counted
 GRP_ROUND = 3  # offline, a round of randomized GRP has time for this many where one takes longer than a slice
 PROBE_DECISIONS = 3  # decision steps of a quick plan timed to estimate what it costs on the cell
@@ -158,7 +157,6 @@ class Planner:
         self.lvws_seconds = math.inf  # what LVWS's quick plan took last (sampling costs as much per schedule)
         self.quick_makespan = math.nan  # the best quick plan's, from the latest state they were made from
         self.quick: dict[str, tuple[float, float]] = {}  # each quick plan's (makespan, seconds), latest made
-        self.record: dict[str, tuple[int, int]] = {}  # improver -> (rounds, rounds that shortened the plan), this cell
         self.quick_at: dict[str, float] = {}  # when each was made, in seconds since the planner started
         self.quick_cost: dict[str, float] = {}  # each quick plan's probed seconds per task to do, on this cell
         self.overrun, self.fallback = 0.0, ""  # the first quick plan finished past the deadline (by, which)
@@ -228,7 +226,7 @@ class Planner:
             self.base_bound = lower_bounds(state.instance).best
             self.lns_window = None
             self._pooled = None
-            self.quick_cost, self.record = {}, {}
+            self.quick_cost = {}
         self.plan = None
         if old is not None:
             try:
@@ -375,29 +373,16 @@ class Planner:
             shorter = self._sample_ahead(state, end)
         elif self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
             shorter = self._sample(state, todo, end)
-        elif not self._whole(todo) and (self.rounds % SAMPLE_EVERY == 0 or self._rate("grp-sample") > self._rate("lns")):
+        elif self.rounds % SAMPLE_EVERY == 0 and not self._whole(todo):
             shorter = self._sample_grp(state, self._grp_round_end(end, deadline))
-            self._tried("grp-sample", shorter)
         elif self._whole(todo) and self.exact in (ExactState.OPEN, ExactState.SHORTENING) \
                 and (self.exact_rounds <= self.lns_rounds or self.exact is ExactState.SHORTENING):
             shorter = self._exact(state, end, deadline)
         else:  # a larger rest, or every other round on a small one (CP-SAT's whole model may find nothing there)
             self.lns_rounds += 1
             shorter = self._lns(state, end)
-            self._tried("lns", shorter)
         self.unimproved = 0 if shorter else self.unimproved + 1
         return shorter
-
-    def _tried(self, improver: str, shorter: bool) -> None:
-        tries, wins = self.record.get(improver, (0, 0))
-        self.record[improver] = (tries + 1, wins + int(shorter))
-
-    def _rate(self, improver: str) -> float:
-        """How often ``improver``'s rounds shortened the plan on this cell (Laplace's rule):
-        on a rest too large for CP-SAT's whole model, randomized GRP takes the rounds
-        between its own while it does better than the neighbourhoods."""
-        tries, wins = self.record.get(improver, (0, 0))
-        return (wins + 1) / (tries + 2)
 
     @property
     def exhausted(self) -> bool:
@@ -519,7 +504,7 @@ class Planner:
             return False  # one run does not fit in the round
         while (time.perf_counter() < end) if not self.counted else made < GRP_SAMPLES:
             policy = GreedyPayloadPolicy(seed=int(self.rng.integers(2**31)), priority="critical-path",
-                                         noise=GRP_NOISE, index_weight=float(self.rng.uniform(0, GRP_INDEX_WEIGHT)))
+                                         noise=GRP_NOISE)
             made += 1
             try:
                 res = simulate(state.instance, policy if self.counted else Until(policy, end), state=state)

@@ -152,28 +152,22 @@ PRIORITIES = ("index", "critical-path")  # the order in which GRP takes the read
 class GreedyPayloadPolicy(_SequentialPolicy):
     name = "grp"
 
-    def __init__(self, seed: int = 0, priority: str = "index", noise: float = 0.0, index_weight: float = 0.0) -> None:
+    def __init__(self, seed: int = 0, priority: str = "index", noise: float = 0.0) -> None:
         if priority not in PRIORITIES:
             raise PolicyError(f"grp: unknown priority {priority!r}; one of {', '.join(PRIORITIES)}")
-        if not noise >= 0 or not index_weight >= 0:
-            raise PolicyError(f"grp: the noise and the index weight must be >= 0, got {noise}, {index_weight}")
+        if not noise >= 0:
+            raise PolicyError(f"grp: the noise must be >= 0, got {noise}")
         super().__init__(seed)
-        self.priority, self.noise, self.index_weight = priority, noise, index_weight
+        self.priority, self.noise = priority, noise
         self._ways_home: tuple[Instance | None, FloatArray | None] = (None, None)
 
     def order(self, inst: Instance, ready: list[int]) -> list[int]:
-        """The ready tasks in the priority's order. In critical-path order, ``index_weight``
-        blends the listed order in (each task's key less its place in the list over the
-        number of tasks, times the longest tail and the weight: 0 is the critical path, a
-        large weight the list's order), and ``noise`` perturbs each key by Gaussian noise of
-        that many mean task durations (randomized list schedules, drawn from the policy's
-        seeded generator)."""
+        """The ready tasks in the priority's order; with ``noise``, the critical-path keys
+        each perturbed by Gaussian noise of ``noise`` mean task durations (randomized list
+        schedules, drawn from the policy's seeded generator)."""
         if self.priority == "index" or not ready:
             return ready
-        tail = inst.critical_tail
-        keys = tail[ready]
-        if self.index_weight > 0:
-            keys = keys - self.index_weight * float(tail.max()) * np.array(ready) / inst.num_tasks
+        keys = inst.critical_tail[ready]
         if self.noise > 0:
             keys = keys + self.noise * float(inst.durations.mean()) * self.rng.standard_normal(len(ready))
         tasks = np.array(ready)

@@ -185,17 +185,3 @@ def test_randomized_grp_is_seeded_and_valid_and_without_noise_is_grp():
     with pytest.raises(PolicyError, match="noise"):
         GreedyPayloadPolicy(noise=-1.0)
 
-
-def test_grp_blending_the_listed_order_in_goes_from_the_critical_path_to_the_list():
-    from lvws_ros.core.families import family_instance
-    from lvws_ros.policies.baselines import GreedyPayloadPolicy
-
-    inst = family_instance("warehouse", 2, 0, num_robots=16, num_tasks=40)
-    index = simulate(inst, GreedyPayloadPolicy(priority="index")).schedule
-    path = simulate(inst, GreedyPayloadPolicy(priority="critical-path")).schedule
-    assert simulate(inst, GreedyPayloadPolicy(priority="critical-path", index_weight=1e6)).schedule.assignments == \
-        index.assignments
-    assert simulate(inst, GreedyPayloadPolicy(priority="critical-path", index_weight=0.0)).schedule.assignments == \
-        path.assignments
-    with pytest.raises(PolicyError, match="index weight"):
-        GreedyPayloadPolicy(index_weight=-1.0)
