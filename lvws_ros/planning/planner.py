@@ -158,7 +158,7 @@ class Planner:
         self.quick_makespan = math.nan  # the best quick plan's, from the latest state they were made from
         self.quick: dict[str, tuple[float, float]] = {}  # each quick plan's (makespan, seconds), latest made
         self.quick_at: dict[str, float] = {}  # when each was made, in seconds since the planner started
-        self.quick_cost: dict[str, float] = {}  # each quick plan's probed seconds per task to do, on this cell
+        self.quick_cost: dict[str, float] = {}  # each quick plan's probed seconds per decision step, on this cell
         self.overrun, self.fallback = 0.0, ""  # the first quick plan finished past the deadline (by, which)
         self.started = time.perf_counter()
         self._instance: Instance | None = None
@@ -244,7 +244,7 @@ class Planner:
         return due
 
     def quick_order(self, state: State) -> list[tuple[str, Callable[[], Policy]]]:
-        """The quick plans, the cheapest on this cell first: each one's cost per task to do,
+        """The quick plans, the cheapest on this cell first: each one's cost per decision step,
         probed once per cell (:meth:`_probe`: its first decision steps from ``state``, timed)
         and kept in :attr:`quick_cost`. Ties keep the listed order."""
         for name, make in self._quick:
@@ -253,11 +253,11 @@ class Planner:
         return sorted(self._quick, key=lambda q: self.quick_cost[q[0]])
 
     def _probe(self, state: State, make: Callable[[], Policy]) -> float:
-        """Seconds per task to do of ``make()``'s run from ``state``: the median of its
+        """Seconds per decision step of ``make()``'s run from ``state``: the median of its
         first PROBE_DECISIONS decision steps (at most PROBE_SECONDS), timed, taken as the
-        cost of each of the steps to come, about one per task to do (a run's first steps
-        start the most tasks, so seconds per task started would flatter a policy whose
-        every step costs the same, like a network's pass over the whole cell)."""
+        cost of each of the steps to come (a run's first steps start the most tasks, so
+        seconds per task started would flatter a policy whose every step costs the same,
+        like a network's pass over the whole cell)."""
         policy = make()
         policy.reset(state.instance)
         probe: State | None = state.copy()
