@@ -39,7 +39,7 @@ import functools
 import graphlib
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -159,18 +159,22 @@ def check_team(snap: TeamSnapshot, checked: TeamSnapshot | None = None) -> None:
     same = checked is not None and (checked.capability_names, checked.trait_names) == (snap.capability_names,
                                                                                       snap.trait_names)
     for n in _changed(snap.robots, checked.robots if same and checked is not None else ()):
-        r = snap.robots[n]
-        where = f"TeamState robots[{n}] ({r.id!r})"
-        if not r.id:
-            raise InstanceError(f"TeamState robots[{n}].id: empty")
-        _bits(r.capabilities, k, f"{where}.capabilities")
-        _finite(r.payload, f"{where}.payload")
-        if r.payload <= 0 and not snap.trait_names:
-            raise InstanceError(f"{where}.payload: must be > 0, got {r.payload!r}")
-        _amounts(r.traits, snap.trait_names, f"{where}.traits")
-        _finite(r.speed, f"{where}.speed")
-        if 0 < r.speed < 1 / MAX_VALUE:
-            raise InstanceError(f"{where}.speed: 0 (fixed) or at least {1 / MAX_VALUE:g}, got {r.speed!r}")
+        check_robot(snap, n, snap.robots[n])
+
+
+def check_robot(snap: TeamSnapshot, n: int, r: RobotInfo) -> None:
+    """InstanceError naming the field when robot ``r`` (``robots[n]``) cannot be one of ``snap``'s."""
+    where = f"TeamState robots[{n}] ({r.id!r})"
+    if not r.id:
+        raise InstanceError(f"TeamState robots[{n}].id: empty")
+    _bits(r.capabilities, len(snap.capability_names), f"{where}.capabilities")
+    _finite(r.payload, f"{where}.payload")
+    if r.payload <= 0 and not snap.trait_names:
+        raise InstanceError(f"{where}.payload: must be > 0, got {r.payload!r}")
+    _amounts(r.traits, snap.trait_names, f"{where}.traits")
+    _finite(r.speed, f"{where}.speed")
+    if 0 < r.speed < 1 / MAX_VALUE:
+        raise InstanceError(f"{where}.speed: 0 (fixed) or at least {1 / MAX_VALUE:g}, got {r.speed!r}")
 
 
 def _changed(items: Sequence[Any], before: Sequence[Any]) -> list[int]:
@@ -186,7 +190,6 @@ def check_graph(snap: GraphSnapshot, checked: GraphSnapshot | None = None) -> No
     its tasks that ``snap`` holds at the same places (the very same objects) are not
     checked again."""
     _finite(snap.stamp, "TaskGraph header.stamp", high=math.inf)
-    k = len(snap.capability_names)
     ids = {t.id for t in snap.tasks}
     if len(ids) != len(snap.tasks) or "" in ids:
         raise InstanceError("TaskGraph tasks: ids must be unique and non-empty")
@@ -200,16 +203,18 @@ def check_graph(snap: GraphSnapshot, checked: GraphSnapshot | None = None) -> No
     else:
         changed, structure_same = list(range(len(snap.tasks))), False
     for n in changed:
-        _check_task(snap, n, k, ids)
+        check_task(snap, n, snap.tasks[n], ids)
     if snap.objective not in ("", *OBJECTIVES):
         raise InstanceError(f"TaskGraph objective: '', 'makespan' or 'return', got {snap.objective[:40]!r}")
     _check_sites(snap, changed)
     if not structure_same:
-        _check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
+        check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
 
 
-def _check_task(snap: GraphSnapshot, n: int, k: int, ids: set[str]) -> None:
-    t = snap.tasks[n]
+def check_task(snap: GraphSnapshot, n: int, t: TaskInfo, ids: Container[str]) -> None:
+    """InstanceError naming the field when task ``t`` (``tasks[n]``) cannot be one of
+    ``snap``'s (its sites aside: :func:`check_task_sites`); ``ids``: the graph's task ids."""
+    k = len(snap.capability_names)
     where = f"TaskGraph tasks[{n}] ({t.id!r})"
     if t.status not in _STATUSES:
         raise InstanceError(f"{where}.status: {t.status} is not one of "
@@ -253,16 +258,21 @@ def _check_sites(snap: GraphSnapshot, tasks: Sequence[int] | None = None) -> Non
         _finite(d, f"TaskGraph site_distances[{n}]")
     known = set(names)
     for n in range(len(snap.tasks)) if tasks is None else tasks:
-        t = snap.tasks[n]
-        for field_, value in (("site_from", t.site_from), ("site_to", t.site_to)):
-            if value and value not in known:
-                raise InstanceError(f"TaskGraph tasks[{n}] ({t.id!r}).{field_}: unknown site {value!r}")
-        if known and not t.site_from:
-            raise InstanceError(f"TaskGraph tasks[{n}] ({t.id!r}).site_from: empty, but the graph has sites")
+        check_task_sites(n, snap.tasks[n], known)
+
+
+def check_task_sites(n: int, t: TaskInfo, known: Container[str]) -> None:
+    """InstanceError naming the field when task ``t`` (``tasks[n]``) is not at the graph's
+    sites ``known`` (none: a graph without sites)."""
+    for field_, value in (("site_from", t.site_from), ("site_to", t.site_to)):
+        if value and value not in known:
+            raise InstanceError(f"TaskGraph tasks[{n}] ({t.id!r}).{field_}: unknown site {value!r}")
+    if known and not t.site_from:
+        raise InstanceError(f"TaskGraph tasks[{n}] ({t.id!r}).site_from: empty, but the graph has sites")
 
 
 @functools.lru_cache(maxsize=4)
-def _check_acyclic(structure: tuple[tuple[str, tuple[str, ...]], ...]) -> None:
+def check_acyclic(structure: tuple[tuple[str, tuple[str, ...]], ...]) -> None:
     """InstanceError on a cycle; memoised, since a world sends the same DAG step after step."""
     try:
         list(graphlib.TopologicalSorter(dict(structure)).static_order())
