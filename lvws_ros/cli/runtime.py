@@ -145,7 +145,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
                      config=args.config or "", bag_dir=args.bag_dir, out_dir=args.out_dir, name=args.name,
                      params_file=args.params_file, gif=not args.no_gif, timeout=args.timeout,
                      sync=not args.no_sync, namespace=args.namespace, domain_id=args.domain_id,
-                     events=args.events, dashboard=args.dashboard, robots=args.robots, instance=args.instance or "")
+                     events=args.events, dashboard=args.dashboard, robots=args.robots, instance=args.instance or "",
+                     protocol=args.protocol)
     except LaunchError as exc:
         print(f"lvws launch: failed: {exc}", file=sys.stderr)
         return 1
@@ -279,6 +280,9 @@ def _add_launch(add: Adder) -> None:
                         "server each, --rate times faster than wall time), the bag holding the goal events")
     p.add_argument("--instance", default=None,
                    help="with --robots actions: the cell (lvws-instance/1; default: the --config cell written as one)")
+    p.add_argument("--protocol", choices=("snapshots", "changes"), default="snapshots",
+                   help="how the simulator sends the cell's state: its whole team and task graph at every step, or "
+                        "numbered changes after the first snapshots (docs/ros.md)")
     p.add_argument("--events", default=None, help="scripted world events (YAML: at t, submit / cancel / fail / "
                                                    "repair); see lvws_ros/sim/events.py")
     p.add_argument("--dashboard", type=int, nargs="?", const=DEFAULT_PORT, default=None, metavar="PORT",

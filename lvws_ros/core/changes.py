@@ -39,7 +39,7 @@ from lvws_ros.core.online import (
 )
 from lvws_ros.errors import InstanceError
 
-__all__ = ["CellChanges", "ChangeGap", "ChangeRefused", "LiveCell", "changes_between"]
+__all__ = ["CellChanges", "ChangeFollower", "ChangeGap", "ChangeRefused", "LiveCell", "changes_between"]
 
 _QUEUED, _READY, _ASSIGNED, _DONE = (int(s) for s in (TaskStatus.QUEUED, TaskStatus.READY, TaskStatus.ASSIGNED,
                                                       TaskStatus.DONE))
@@ -313,3 +313,74 @@ def changes_between(before: tuple[TeamSnapshot, GraphSnapshot], after: tuple[Tea
     return CellChanges(seq, max(t1.stamp, g1.stamp), tasks,
                        tuple(t.id for t in gone if t.status != _DONE), tuple(t.id for t in gone if t.status == _DONE),
                        robots, tuple(r.id for r in t0.robots if r.id not in new_robot_ids))
+
+
+MAX_HELD = 100_000  # batches held while a resync is awaited (beyond: the oldest are dropped; the resync covers them)
+
+
+class ChangeFollower:
+    """What a node does with numbered batches: take them in order into a :class:`LiveCell`,
+    hold those that come early, and say when a snapshot is needed (:attr:`needs_resync`):
+    before the first snapshot, after a gap, after a batch it refused. ``retire_after``
+    (seconds, < 0: never): done work retires from the cell that long after it ended,
+    whatever the world does (:meth:`LiveCell.retire`)."""
+
+    def __init__(self, retire_after: float = -1.0) -> None:
+        self.cell: LiveCell | None = None
+        self.retire_after = retire_after
+        self.held: dict[int, CellChanges] = {}
+        self.needs_resync = False
+        self.notices: list[str] = []  # for the node's diagnostics (WARN)
+        self.gaps = self.refused = self.repeated = self.resyncs = 0
+
+    def take(self, ch: CellChanges) -> bool:
+        """Take one batch; whether the cell changed."""
+        if self.cell is None:
+            self._hold(ch)
+            self.needs_resync = True
+            return False
+        if ch.seq <= self.cell.seq:
+            self.repeated += 1
+            return False
+        self._hold(ch)
+        return self._drain()
+
+    def resync(self, team: TeamSnapshot, graph: GraphSnapshot, seq: int) -> None:
+        """Take the world's snapshots as of batch ``seq``, then the held batches after it
+        (InstanceError, nothing taken, for snapshots that cannot be used)."""
+        if self.cell is None:
+            self.cell = LiveCell(team, graph, seq)
+        else:
+            self.cell.reset(team, graph, seq)
+        self.resyncs += 1
+        self.needs_resync = False
+        self._drain()
+
+    def _hold(self, ch: CellChanges) -> None:
+        self.held[ch.seq] = ch
+        while len(self.held) > MAX_HELD:
+            del self.held[min(self.held)]
+
+    def _drain(self) -> bool:
+        cell = self.cell
+        assert cell is not None
+        changed = False
+        for seq in [s for s in self.held if s <= cell.seq]:
+            del self.held[seq]
+        while (ch := self.held.pop(cell.seq + 1, None)) is not None:
+            try:
+                cell.apply(ch)
+                changed = True
+            except ChangeRefused as exc:
+                self.refused += 1
+                self.notices.append(f"{exc}: not taken; asking the world for its snapshot")
+                self.needs_resync = True
+                break
+        if self.held and not self.needs_resync:
+            self.gaps += 1
+            self.notices.append(f"CellChanges {cell.seq + 1}-{min(self.held) - 1} missed: asking the world for its "
+                                "snapshot")
+            self.needs_resync = True
+        if self.retire_after >= 0 and cell.retire(self.retire_after):
+            changed = True
+        return changed

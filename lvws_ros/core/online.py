@@ -125,6 +125,7 @@ class OnlineDecision:
     team_stamp: float
     graph_stamp: float
     policy: str = ""
+    state_latency: float = 0.0  # wall seconds from the arrival of the state that made it due to its publication
 
 
 def _finite(value: float, where: str, low: float = 0.0, high: float = MAX_VALUE) -> None:

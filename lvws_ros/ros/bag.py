@@ -19,12 +19,20 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from lvws_ros.core.changes import CellChanges, LiveCell
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, TeamSnapshot
 from lvws_ros.errors import BagError
-from lvws_ros.ros.convert import decision_from_msg, diagnostics_from_msg, graph_from_msg, team_from_msg
+from lvws_ros.ros.convert import (
+    changes_from_msg,
+    decision_from_msg,
+    diagnostics_from_msg,
+    graph_from_msg,
+    team_from_msg,
+)
 from lvws_ros.ros.resources import msg_dir
 from lvws_ros.ros.topics import (
     ASSIGNMENTS_TOPIC,
+    CHANGES_TOPIC,
     DIAGNOSTICS_TOPIC,
     GOAL_EVENTS_TOPIC,
     GRAPH_TOPIC,
@@ -34,7 +42,8 @@ from lvws_ros.ros.topics import (
 
 __all__ = ["Run", "flush", "open_writer", "qos_from_bag", "qos_to_bag", "read_run", "reindex", "typestore"]
 
-LVWS_TYPES = ("RobotState", "TeamState", "Site", "Task", "TaskGraph", "Assignment", "AssignmentArray", "GoalEvent")
+LVWS_TYPES = ("RobotState", "TeamState", "Site", "Task", "TaskGraph", "Assignment", "AssignmentArray", "GoalEvent",
+              "CellChanges")
 
 
 def typestore() -> Typestore:
@@ -179,6 +188,26 @@ class Run:
     goal_events: list[tuple[int, str, str]] = field(default_factory=list)  # (kind, task, robot): a dispatcher's
     duration_ns: int = 0
     namespace: str = "/"  # the cell's namespace (its topics' prefix)
+    changes: list[CellChanges] = field(default_factory=list)  # a world that speaks changes (CellChanges)
+
+
+def _replay_changes(run: Run) -> None:
+    """A bag of a world that speaks changes: its first snapshots and the changes after them
+    become the snapshots each change gives (``teams``/``graphs`` as a snapshot world's)."""
+    if not run.changes or not run.teams or not run.graphs:
+        return
+    cell = LiveCell(run.teams[0], run.graphs[0])
+    teams, graphs = [run.teams[0]], [run.graphs[0]]
+    for ch in sorted(run.changes, key=lambda c: c.seq):
+        if ch.seq <= cell.seq:
+            continue
+        if ch.seq != cell.seq + 1:
+            raise BagError(f"{run.path}: CellChanges {cell.seq + 1}-{ch.seq - 1} are not in the bag")
+        cell.apply(ch)
+        team, graph = cell.snapshots()
+        teams.append(team)
+        graphs.append(graph)
+    run.teams, run.graphs = teams, graphs
 
 
 def _add(run: Run, topic: str, msg: Any) -> None:
@@ -190,6 +219,8 @@ def _add(run: Run, topic: str, msg: Any) -> None:
         run.decisions.append(decision_from_msg(msg))
     elif topic == GOAL_EVENTS_TOPIC:
         run.goal_events.append((int(msg.kind), str(msg.task_id), str(msg.robot_id)))
+    elif topic == CHANGES_TOPIC:
+        run.changes.append(changes_from_msg(msg))
     else:
         run.diagnostics.extend(diagnostics_from_msg(msg))
 
@@ -202,7 +233,7 @@ def read_run(path: str | Path) -> Run:
     p = Path(path)
     if not p.exists():
         raise BagError(f"{p}: no such bag")
-    wanted = (TEAM_TOPIC, GRAPH_TOPIC, ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GOAL_EVENTS_TOPIC)
+    wanted = (TEAM_TOPIC, GRAPH_TOPIC, ASSIGNMENTS_TOPIC, DIAGNOSTICS_TOPIC, GOAL_EVENTS_TOPIC, CHANGES_TOPIC)
     try:
         with AnyReader([p], default_typestore=typestore()) as reader:
             run = Run(p, {c.topic: c.msgcount for c in reader.connections}, duration_ns=reader.duration)
@@ -215,6 +246,7 @@ def read_run(path: str | Path) -> Run:
                 name = names[conn.topic]
                 if name is not None and name[1] in wanted and (name[1] != DIAGNOSTICS_TOPIC or name[0] == run.namespace):
                     _add(run, name[1], reader.deserialize(raw, conn.msgtype))
+        _replay_changes(run)
     except BagError:
         raise
     except Exception as exc:  # rosbags raises many kinds on a broken bag

@@ -27,17 +27,20 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import rclpy
-from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
-from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitTasks
+from lvws_msgs.msg import AssignmentArray, CellChanges, TaskGraph, TeamState
+from lvws_msgs.srv import CancelTask, Resync, SetRobotFault, SubmitTasks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
+from lvws_ros.core.changes import changes_between
 from lvws_ros.core.executor import TaskStatus
+from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
 from lvws_ros.errors import AssignmentRejected, ConfigError, LvwsError, WorldEventRejected
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main, spin_once
@@ -53,8 +56,10 @@ DESCRIPTION = (
     "this many nodes subscribe, default 1), wait_for_subscribers (wall s), "
     "max_sim_time (s), summary (JSON path), gif (animated GIF path), frame_every (sim s between GIF frames), "
     "events (scripted world events, YAML), stuck_grace (wall s a run waits for a repair after a service made a "
-    "task impossible, default 10)."
+    "task impossible, default 10), protocol (snapshots: the whole state at every step; changes: numbered "
+    "CellChanges after the first snapshots, which the resync service gives again)."
 )
+PROTOCOLS = ("snapshots", "changes")  # how the cell's state goes out (parameter protocol)
 PROGRESS_SECONDS = 2.0  # wall seconds between progress lines (lvws launch shows them)
 ROBOT_COLORS = {"panda": (1.0, 0.5, 0.0), "jackal": (0.1, 0.4, 0.9), "husky": (0.1, 0.7, 0.2)}
 
@@ -119,6 +124,15 @@ class CellSimNode(Node):
         noise_seed = int(self.declare_parameter("noise_seed", 0).value)
         self.sim = CellSim(load_cell_config(cfg_path or case_study_config()), noise=noise, noise_seed=noise_seed)
         self.frame = self.sim.cfg.frame_id
+        # "snapshots": the whole team and task graph at every state; "changes": those once, then
+        # numbered CellChanges, with the snapshots on request (the resync service; docs/ros.md)
+        self.protocol = str(self.declare_parameter("protocol", "snapshots").value)
+        if self.protocol not in PROTOCOLS:
+            raise LvwsError(f"parameter protocol: one of {', '.join(PROTOCOLS)}, got {self.protocol!r}")
+        self.seq = 0  # the last CellChanges published
+        self.sent: tuple[TeamSnapshot, GraphSnapshot] | None = None  # the cell as of it
+        self.changes_pub = self.create_publisher(CellChanges, topics.CHANGES_TOPIC, topics.CHANGES_QOS)
+        self.create_service(Resync, topics.RESYNC_SERVICE, self.on_resync)
         self.team_pub = self.create_publisher(TeamState, topics.TEAM_TOPIC, topics.TEAM_QOS)
         self.graph_pub = self.create_publisher(TaskGraph, topics.GRAPH_TOPIC, topics.GRAPH_QOS)
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK_TOPIC, topics.CLOCK_QOS)
@@ -148,8 +162,36 @@ class CellSimNode(Node):
         gets a state from its future, and answers it no earlier than its stamp."""
         self.last_stamp = self.sim.time
         self.publish_clock()
-        self.team_pub.publish(convert.team_to_msg(self.sim.team_snapshot(), self.frame))
-        self.graph_pub.publish(convert.graph_to_msg(self.sim.graph_snapshot(), self.frame))
+        team, graph = self.sim.team_snapshot(), self.sim.graph_snapshot()
+        if self.protocol == "changes" and self.sent is not None:
+            self.publish_changes((team, graph))
+            return
+        self.team_pub.publish(convert.team_to_msg(team, self.frame))
+        self.graph_pub.publish(convert.graph_to_msg(graph, self.frame))
+        self.sent = (team, graph)
+
+    def publish_team(self) -> None:
+        """The team alone (robots moved), as a snapshot or as a change."""
+        self.publish_clock()
+        team = self.sim.team_snapshot()
+        if self.protocol == "changes" and self.sent is not None:
+            self.publish_changes((team, replace(self.sent[1], stamp=team.stamp)))
+        else:
+            self.team_pub.publish(convert.team_to_msg(team, self.frame))
+
+    def publish_changes(self, now: tuple[TeamSnapshot, GraphSnapshot]) -> None:
+        """What changed since the last state sent, as the next CellChanges."""
+        assert self.sent is not None
+        self.seq += 1
+        self.changes_pub.publish(convert.changes_to_msg(changes_between(self.sent, now, self.seq), self.frame))
+        self.sent = now
+
+    def on_resync(self, req: Resync.Request, res: Resync.Response) -> Resync.Response:
+        """The cell as of the last CellChanges sent (before any: as it is now, change 0)."""
+        team, graph = self.sent or (self.sim.team_snapshot(), self.sim.graph_snapshot())
+        res.team, res.graph = convert.team_to_msg(team, self.frame), convert.graph_to_msg(graph, self.frame)
+        res.seq = self.seq
+        return res
 
     def publish_clock(self) -> None:
         self.clock_pub.publish(Clock(clock=convert.to_time(self.sim.time)))
@@ -285,8 +327,7 @@ class CellSimNode(Node):
                     break
             elif self.sim.time >= self.next_pose - 1e-9:
                 self.next_pose = self.sim.time + 1.0
-                self.publish_clock()
-                self.team_pub.publish(convert.team_to_msg(self.sim.team_snapshot(), self.frame))
+                self.publish_team()
                 self.publish_markers()
             if self.later and self.sim.time >= self.later[0].at - 1e-9:
                 break  # a scripted event is due: on_tick applies it next

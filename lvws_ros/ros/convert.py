@@ -15,6 +15,7 @@ from builtin_interfaces.msg import Duration, Time
 from lvws_msgs.msg import (
     Assignment,
     AssignmentArray,
+    CellChanges,
     CellTask,
     GoalEvent,
     InstanceTask,
@@ -25,15 +26,33 @@ from lvws_msgs.msg import (
     TeamState,
 )
 
+from lvws_ros.core.changes import CellChanges as Changes
 from lvws_ros.core.dispatch import GoalNews
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskInfo, TeamSnapshot
 from lvws_ros.errors import ConfigError
 from lvws_ros.sim.config import PART_PAYLOAD
 
-__all__ = ["GraphReader", "TeamReader", "cell_task_from_msg", "cell_task_to_msg", "decision_from_msg",
-           "decision_to_msg", "from_time", "goal_event_to_msg", "graph_from_msg", "graph_to_msg",
-           "instance_task_from_msg", "instance_task_to_msg", "team_from_msg", "team_to_msg", "to_duration", "to_time"]
+__all__ = [
+    "GraphReader",
+    "TeamReader",
+    "cell_task_from_msg",
+    "cell_task_to_msg",
+    "changes_from_msg",
+    "changes_to_msg",
+    "decision_from_msg",
+    "decision_to_msg",
+    "from_time",
+    "goal_event_to_msg",
+    "graph_from_msg",
+    "graph_to_msg",
+    "instance_task_from_msg",
+    "instance_task_to_msg",
+    "team_from_msg",
+    "team_to_msg",
+    "to_duration",
+    "to_time",
+]
 
 
 def to_time(seconds: float) -> Time:
@@ -67,13 +86,16 @@ def _stamped(msg: Any, snap: TeamSnapshot | GraphSnapshot, frame_id: str) -> Any
 
 def team_to_msg(snap: TeamSnapshot, frame_id: str = "map") -> TeamState:
     msg = _stamped(TeamState(), snap, frame_id)
-    for r in snap.robots:
-        rs = RobotState(id=r.id, kind=r.kind, available=r.available, capabilities=list(r.capabilities),
-                        payload=float(r.payload), current_task=r.current_task, busy_for=float(r.busy_for),
-                        site=r.site, speed=float(r.speed), traits=[float(a) for a in r.traits], home=r.home)
-        rs.pose.x, rs.pose.y, rs.pose.theta = r.pose
-        msg.robots.append(rs)
+    msg.robots = [_robot_msg(r) for r in snap.robots]
     return msg
+
+
+def _robot_msg(r: RobotInfo) -> RobotState:
+    rs = RobotState(id=r.id, kind=r.kind, available=r.available, capabilities=list(r.capabilities),
+                    payload=float(r.payload), current_task=r.current_task, busy_for=float(r.busy_for),
+                    site=r.site, speed=float(r.speed), traits=[float(a) for a in r.traits], home=r.home)
+    rs.pose.x, rs.pose.y, rs.pose.theta = r.pose
+    return rs
 
 
 def team_from_msg(msg: Any) -> TeamSnapshot:
@@ -95,17 +117,36 @@ def _robot_info(r: Any) -> RobotInfo:
 
 def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
     msg = _stamped(TaskGraph(), snap, frame_id)
-    for t in snap.tasks:
-        msg.tasks.append(Task(id=t.id, status=int(t.status), capabilities=list(t.capabilities),
-                              payload=float(t.payload), duration=float(t.duration),
-                              prerequisites=list(t.prerequisites), assigned_robots=list(t.assigned_robots),
-                              start_time=to_time(t.start or 0.0), end_time=to_time(t.end or 0.0),
-                              site_from=t.site_from, site_to=t.site_to, requires=[float(a) for a in t.requires],
-                              roles=int(t.roles)))
+    msg.tasks = [_task_msg(t) for t in snap.tasks]
     msg.sites = [Site(id=name, x=float(x), y=float(y)) for name, x, y in snap.sites]
     msg.site_distances = [float(d) for d in snap.distances]
     msg.roles, msg.objective = bool(snap.roles), snap.objective
     return msg
+
+
+def _task_msg(t: TaskInfo) -> Task:
+    return Task(id=t.id, status=int(t.status), capabilities=list(t.capabilities), payload=float(t.payload),
+                duration=float(t.duration), prerequisites=list(t.prerequisites), assigned_robots=list(t.assigned_robots),
+                start_time=to_time(t.start or 0.0), end_time=to_time(t.end or 0.0), site_from=t.site_from,
+                site_to=t.site_to, requires=[float(a) for a in t.requires], roles=int(t.roles))
+
+
+def changes_to_msg(ch: Changes, frame_id: str = "map") -> CellChanges:
+    msg = CellChanges(seq=ch.seq, tasks=[_task_msg(t) for t in ch.tasks], tasks_cancelled=list(ch.cancelled),
+                      tasks_retired=list(ch.retired), robots=[_robot_msg(r) for r in ch.robots],
+                      robots_left=list(ch.left))
+    msg.header.stamp = to_time(ch.stamp)
+    msg.header.frame_id = frame_id
+    return msg
+
+
+def changes_from_msg(msg: Any) -> Changes:
+    """A CellChanges message as the core's batch (its tasks and robots read as the
+    snapshot readers read them)."""
+    return Changes(int(msg.seq), from_time(msg.header.stamp),
+                   tuple(_task_of_fields(t.id, _task_fields(t)) for t in msg.tasks), tuple(msg.tasks_cancelled),
+                   tuple(msg.tasks_retired), tuple(_robot_of_fields(r.id, _robot_fields(r)) for r in msg.robots),
+                   tuple(msg.robots_left))
 
 
 _ASSIGNED, _DONE = int(TaskStatus.ASSIGNED), int(TaskStatus.DONE)  # ints: compared for every task of every graph
@@ -279,13 +320,15 @@ def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:
     msg.decision_latency = to_duration(d.latency)
     msg.team_stamp = to_time(d.team_stamp)
     msg.graph_stamp = to_time(d.graph_stamp)
+    msg.state_latency = to_duration(d.state_latency)
     return msg
 
 
 def decision_from_msg(msg: Any) -> OnlineDecision:
     return OnlineDecision(int(msg.decision_step), tuple((a.task_id, tuple(a.robot_ids)) for a in msg.assignments),
                           tuple(msg.waiting_robot_ids), from_time(msg.decision_latency), from_time(msg.team_stamp),
-                          from_time(msg.graph_stamp), msg.policy)
+                          from_time(msg.graph_stamp), msg.policy,
+                          from_time(msg.state_latency) if hasattr(msg, "state_latency") else 0.0)
 
 
 def diagnostics_from_msg(msg: Any) -> list[dict[str, str]]:

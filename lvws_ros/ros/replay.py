@@ -20,7 +20,16 @@ from rosbags.highlevel import AnyReader
 
 from lvws_ros.errors import BagError, LvwsError
 from lvws_ros.ros.bag import LVWS_TYPES, qos_from_bag, typestore
-from lvws_ros.ros.convert import graph_from_msg, graph_to_msg, team_from_msg, team_to_msg
+from lvws_ros.ros.convert import (
+    decision_from_msg,
+    decision_to_msg,
+    from_time,
+    graph_from_msg,
+    graph_to_msg,
+    team_from_msg,
+    team_to_msg,
+    to_time,
+)
 from lvws_ros.ros.topics import message_class
 
 # Replay publishes faster than the recording at --rate > 1; a deeper history than the
@@ -84,7 +93,14 @@ def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[s
 _CONVERT = {
     "lvws_msgs/msg/TeamState": lambda m: team_to_msg(team_from_msg(m), m.header.frame_id),
     "lvws_msgs/msg/TaskGraph": lambda m: graph_to_msg(graph_from_msg(m), m.header.frame_id),
+    "lvws_msgs/msg/AssignmentArray": lambda m: _decision(m),
 }
+
+
+def _decision(m: Any) -> Any:
+    msg = decision_to_msg(decision_from_msg(m), to_time(from_time(m.header.stamp)))
+    msg.header.frame_id = m.header.frame_id
+    return msg
 
 
 def _converters(reader: AnyReader, conns: list[Any], path: Path) -> dict[str, Any]:

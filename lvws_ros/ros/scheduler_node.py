@@ -32,19 +32,22 @@ import time
 import traceback
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from lvws_msgs.msg import AssignmentArray, TaskGraph, TeamState
+from lvws_msgs.msg import AssignmentArray, CellChanges, TaskGraph, TeamState
+from lvws_msgs.srv import Resync
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
+from rclpy.task import Future as RclpyFuture
 
+from lvws_ros.core.changes import ChangeFollower
 from lvws_ros.core.executor import Policy
 from lvws_ros.core.online import OnlineDecision, OnlineScheduler, close_policy
 from lvws_ros.errors import ConfigError, LvwsError
@@ -117,6 +120,9 @@ PARAMETERS: dict[str, Param] = {
     "managed": Param(bool, False, "a managed lifecycle node: configure loads the policies and the model, activate "
                                   "starts deciding and publishing, deactivate stops, cleanup frees; false: it "
                                   "configures and activates itself at start", read_only=True),
+    "retire_after": Param(float, -1.0, "seconds after which a DONE task whose dependents have all started leaves "
+                                       "the node's state, in a world that speaks changes; < 0: when the world "
+                                       "retires it", -1.0, 1e9),
     "use_sim_time": Param(bool, False, "rclpy's: the node's clock follows /clock"),
 }
 RUNTIME_POLICY_PARAMETERS = ("policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "beam_width",
@@ -256,6 +262,13 @@ class SchedulerNode(LifecycleNode):
         self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, topics.DIAGNOSTICS_QOS)
         self.create_subscription(TeamState, topics.TEAM_TOPIC, self.on_team, topics.TEAM_QOS)
         self.create_subscription(TaskGraph, topics.GRAPH_TOPIC, self.on_graph, topics.GRAPH_QOS)
+        self.create_subscription(CellChanges, topics.CHANGES_TOPIC, self.on_changes, topics.CHANGES_QOS)
+        self.follower = ChangeFollower(float(values["retire_after"]))  # the world's changes, once it sends some
+        self.resync_client = self.create_client(Resync, topics.RESYNC_SERVICE)
+        self.resync_pending: RclpyFuture | None = None
+        self.snapshots_ignored = 0  # snapshot messages of a world that speaks changes (its resync is the truth)
+        self.step_started = 0.0  # perf_counter: the arrival of the state the decision in flight answers
+        self.last_state_latency = 0.0
         # wall-clock timers: with use_sim_time a paused simulator would stop ROS-time ones
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
@@ -365,13 +378,81 @@ class SchedulerNode(LifecycleNode):
 
     def on_team(self, msg: TeamState) -> None:
         self.received += 1
+        if self.follower.cell is not None:  # a world that speaks changes: its resync answers are the snapshots
+            self.snapshots_ignored += 1
+            return
         self.arrived = time.perf_counter()
         self.take("TeamState", lambda core: core.offer_team(self.team_reader.read(msg)))
 
     def on_graph(self, msg: TaskGraph) -> None:
         self.received += 1
+        if self.follower.cell is not None:
+            self.snapshots_ignored += 1
+            return
         self.arrived = time.perf_counter()
         self.take("TaskGraph", lambda core: core.offer_graph(self.graph_reader.read(msg)))
+
+    def on_changes(self, msg: CellChanges) -> None:
+        """A batch of the world's changes: taken in order (a gap or a batch that cannot
+        apply: a WARN and a resync), then the cell as it now is goes to the core."""
+        self.received += 1
+        self.arrived = time.perf_counter()
+        try:
+            batch = convert.changes_from_msg(msg)
+        except (TypeError, ValueError) as exc:
+            self.report(DiagnosticStatus.WARN, f"CellChanges {msg.seq} ignored: {exc}; asking for a snapshot")
+            self.follower.needs_resync = True
+            self.request_resync()
+            return
+        self.when_idle(lambda: self.guarded(lambda: self.follow(lambda: self.follower.take(batch))))
+
+    def follow(self, take: Callable[[], bool]) -> None:
+        """Let the follower take a batch or a resync; offer the cell to the core if it changed."""
+        changed = take()
+        while self.follower.notices:
+            self.report(DiagnosticStatus.WARN, self.follower.notices.pop(0))
+        self.request_resync()
+        if changed and self.follower.cell is not None:
+            self.latest.pop("TeamState", None)
+            self.latest.pop("TaskGraph", None)
+            self.latest["cell"] = lambda: self.when_idle(lambda: self.guarded(self.offer_cell))  # for a new core
+            self.offer_cell()
+
+    def offer_cell(self) -> None:
+        """The cell the world's changes describe, to the core as a snapshot pair."""
+        cell, core = self.follower.cell, self.core
+        if cell is None or core is None:
+            return
+        team, graph = cell.snapshots()
+        self.offer("TeamState", lambda: core.offer_team(team))
+        self.offer("TaskGraph", lambda: core.offer_graph(graph))
+
+    def request_resync(self) -> None:
+        """Ask the world for its snapshots (one request at a time) when the follower needs them."""
+        if not self.follower.needs_resync or self.resync_pending is not None:
+            return
+        if not self.resync_client.service_is_ready():
+            return  # on_settle asks again
+        pending = self.resync_pending = self.resync_client.call_async(Resync.Request())
+        pending.add_done_callback(lambda f: self.when_idle(lambda: self.guarded(lambda: self.resynced(f))))
+
+    def resynced(self, future: RclpyFuture) -> None:
+        self.resync_pending = None
+        res = future.result()
+        if res is None:
+            return
+        self.arrived = time.perf_counter()
+        team, graph = self.team_reader.read(res.team), self.graph_reader.read(res.graph)
+
+        def take() -> bool:
+            try:
+                self.follower.resync(team, graph, int(res.seq))
+            except LvwsError as exc:
+                self.report(DiagnosticStatus.ERROR, f"resync snapshots ignored: {exc}")
+                return False
+            self.report(DiagnosticStatus.OK, f"resynced: the world's cell as of change {int(res.seq)}")
+            return True
+        self.follow(take)
 
     def take(self, kind: str, offer: Callable[[OnlineScheduler], bool]) -> None:
         """Offer a message to the core (once it is configured and idle); kept as the
@@ -430,6 +511,7 @@ class SchedulerNode(LifecycleNode):
             self.unsynced_since = time.monotonic()
 
     def on_settle(self) -> None:
+        self.request_resync()
         if self.in_flight is None and self.unsynced_since is not None \
                 and time.monotonic() - self.unsynced_since > SETTLE_SECONDS:
             self.unsynced_since = None
@@ -454,6 +536,7 @@ class SchedulerNode(LifecycleNode):
             self.deferred.append(self.maybe_step)
             return
         self.deciding_core = self.core
+        self.step_started = self.arrived or time.perf_counter()  # the state it answers arrived then
         self.in_flight = self.worker.submit(self.core.decide, started)
         self.in_flight.add_done_callback(lambda _done: self.decided.trigger())
 
@@ -492,6 +575,8 @@ class SchedulerNode(LifecycleNode):
         self.last_latency, self.last_latency_step = decision.latency, decision.step + 1  # as "decisions" counts
         # never stamped before the inputs it answers (a sim clock may lag the state)
         stamp = max(self.get_clock().now().nanoseconds / 1e9, decision.team_stamp, decision.graph_stamp)
+        decision = replace(decision, state_latency=time.perf_counter() - self.step_started)
+        self.last_state_latency = decision.state_latency
         self.pub.publish(convert.decision_to_msg(decision, convert.to_time(stamp)))
         made = ", ".join(f"{t}<-{'+'.join(r)}" for t, r in decision.assignments) or "-"
         self.get_logger().info(f"step {decision.step}: {made}; waiting {', '.join(decision.waiting) or '-'} "
@@ -531,7 +616,11 @@ class SchedulerNode(LifecycleNode):
         status.values = [KeyValue(key=k, value=str(v)) for k, v in (
             ("policy", self.policy_name), ("seed", self.seed), ("decisions", core.step if core else 0),
             ("last_latency_ms", f"{1000 * self.last_latency:.3f}"), ("last_latency_step", self.last_latency_step),
-            ("messages", self.received),
+            ("last_state_latency_ms", f"{1000 * self.last_state_latency:.3f}"), ("messages", self.received),
+            ("changes_seq", self.follower.cell.seq if self.follower.cell is not None else 0),
+            ("changes_resyncs", self.follower.resyncs), ("changes_gaps", self.follower.gaps),
+            ("changes_refused", self.follower.refused),
+            ("retired", self.follower.cell.retired_count if self.follower.cell is not None else 0),
             ("out_of_order_dropped", core.dropped if core else 0), ("world_restarts", core.restarts if core else 0),
             ("pending", len(core.pending) if core else 0), ("fallback_steps", core.fallbacks if core else 0),
             ("lifecycle", "active" if self.active else "inactive" if core is not None else "unconfigured"))]

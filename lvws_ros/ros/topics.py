@@ -24,6 +24,8 @@ MARKERS_TOPIC = "lvws/markers"
 DIAGNOSTICS_TOPIC = "diagnostics"
 CLOCK_TOPIC = "clock"
 GOAL_EVENTS_TOPIC = "lvws/goal_events"
+CHANGES_TOPIC = "lvws/changes"  # the change-only protocol (docs/ros.md): numbered CellChanges
+RESYNC_SERVICE = "lvws/resync"  # its snapshots on request (lvws_msgs/srv/Resync)
 CLOCK_REMAP = ("-r", "/clock:=clock")  # a namespaced node on sim time reads its cell's clock
 
 TEAM_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
@@ -35,6 +37,7 @@ MARKERS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durab
 DIAGNOSTICS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 GOAL_EVENTS_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.VOLATILE)
+CHANGES_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 CLOCK_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
                        history=HistoryPolicy.KEEP_LAST)
 
@@ -47,6 +50,7 @@ TOPICS: dict[str, tuple[str, QoSProfile]] = {
     DIAGNOSTICS_TOPIC: ("diagnostic_msgs/msg/DiagnosticArray", DIAGNOSTICS_QOS),
     CLOCK_TOPIC: ("rosgraph_msgs/msg/Clock", CLOCK_QOS),
     GOAL_EVENTS_TOPIC: ("lvws_msgs/msg/GoalEvent", GOAL_EVENTS_QOS),  # the dispatcher's (a world of real robots)
+    CHANGES_TOPIC: ("lvws_msgs/msg/CellChanges", CHANGES_QOS),  # a world that speaks changes
 }
 
 

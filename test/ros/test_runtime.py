@@ -23,12 +23,21 @@ from lvws_ros.cli.report import report, verify
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import BagError
 from lvws_ros.ros.bag import read_run
-from lvws_ros.ros.topics import GOAL_EVENTS_TOPIC, GRAPH_QOS, TEAM_QOS, TOPICS, message_class, split_topic
+from lvws_ros.ros.topics import (
+    CHANGES_TOPIC,
+    GOAL_EVENTS_TOPIC,
+    GRAPH_QOS,
+    TEAM_QOS,
+    TOPICS,
+    message_class,
+    split_topic,
+)
 
 pytestmark = pytest.mark.ros  # crosses processes over real DDS
 
 REFERENCE_BAG = REPO / "bags" / "reference" / "case-study-lvws"
-ALL_TOPICS = {f"/{t}" for t in TOPICS if t != GOAL_EVENTS_TOPIC}  # the root namespace's (goal events: a dispatcher's)
+# the root namespace's (goal events: a dispatcher's; changes: a world that speaks them)
+ALL_TOPICS = {f"/{t}" for t in TOPICS if t not in (GOAL_EVENTS_TOPIC, CHANGES_TOPIC)}
 
 
 def read_with_anyreader(bag: Path) -> dict[str, int]:
