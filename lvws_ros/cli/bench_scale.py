@@ -135,8 +135,60 @@ def cell_snapshots(state: Any) -> tuple[Any, Any]:
     return team, graph
 
 
+class _SnapshotWire:
+    """The world's state as a node gets it from a world of snapshots: both messages, read as
+    the scheduler node reads them."""
+
+    def __init__(self) -> None:
+        from lvws_ros.ros import convert
+
+        self.convert = convert
+        self.team_reader, self.graph_reader = convert.TeamReader(), convert.GraphReader()
+
+    def send(self, team: Any, graph: Any) -> Any:
+        """The messages of this state (the world's work), and the node's reading of them."""
+        team_msg, graph_msg = self.convert.team_to_msg(team), self.convert.graph_to_msg(graph)
+        return lambda: (self.team_reader.read(team_msg), self.graph_reader.read(graph_msg))
+
+
+class _ChangeWire(_SnapshotWire):
+    """The same from a world that speaks changes: its first snapshots, then one CellChanges
+    per state, taken as the scheduler node takes them (``ChangeFollower``)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        from lvws_ros.core.changes import ChangeFollower
+
+        self.follower = ChangeFollower()
+        self.sent: tuple[Any, Any] | None = None
+        self.seq = 0
+
+    def send(self, team: Any, graph: Any) -> Any:
+        from lvws_ros.core.changes import changes_between
+
+        follower = self.follower
+        if self.sent is None:
+            first = super().send(team, graph)
+
+            def read() -> Any:
+                first_team, first_graph = first()
+                follower.resync(first_team, first_graph, 0)
+                assert follower.cell is not None
+                return follower.cell.snapshots()
+        else:
+            self.seq += 1
+            msg = self.convert.changes_to_msg(changes_between(self.sent, (team, graph), self.seq))
+
+            def read() -> Any:
+                follower.take(self.convert.changes_from_msg(msg))
+                assert follower.cell is not None
+                return follower.cell.snapshots()
+        self.sent = (team, graph)
+        return read
+
+
 def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: bool = True,
-                 pace: float = 0.0) -> list[tuple[float, str]]:
+                 pace: float = 0.0, protocol: str = "snapshots") -> list[tuple[float, str]]:
     """Seconds per decision of the scheduler node's work (both messages converted to
     snapshots, OnlineScheduler.decide), at each decision step of a whole run, with what
     decided it (``auto-planner``: "first" for the cell's first decision, which waits for the
@@ -144,18 +196,19 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     plan; "none" for a step where no decision was due; any other policy: its name); after a
     warm-up run on a small instance (a running node has made decisions before). ``pace``:
     wall seconds per unit of the instance's time between two decisions, as a cell whose
-    tasks take time gives its planner (0: none)."""
+    tasks take time gives its planner (0: none). ``protocol``: how the world sends its state
+    (``snapshots`` or ``changes``)."""
     if warm_up:
-        node_latency(policy, family, 10, 20, seed + 1, warm_up=False)
+        node_latency(policy, family, 10, 20, seed + 1, warm_up=False, protocol=protocol)
     from lvws_ros.core.executor import State, TaskStatus
     from lvws_ros.core.online import OnlineScheduler
     from lvws_ros.registry import make_policy
-    from lvws_ros.ros import convert
     from lvws_ros.ros.scheduler_node import collect_after_decision
 
     inst = make_instance(family, n, m, seed)
     planner = policy == "auto-planner"  # auto as the node runs it: its planner in a process beside
-    online = OnlineScheduler(make_policy("auto", seed=seed, background=True) if planner else make_policy(policy, seed=seed),
+    online = OnlineScheduler(make_policy("auto", seed=seed, background=True, first_wait=0.0) if planner  # as the node
+                             else make_policy(policy, seed=seed),
                              ack_timeout=1e9)
     gc.freeze()  # as the scheduler node does after start-up
     process = getattr(online.policy, "process", None)
@@ -163,13 +216,13 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
         process.wait_ready(60.0)  # first decision waits for it: a node started at once with its world)
     state = State.initial(inst)
     lat: list[tuple[float, str]] = []
-    team_reader, graph_reader = convert.TeamReader(), convert.GraphReader()  # as the node reads its messages
+    wire = _ChangeWire() if protocol == "changes" else _SnapshotWire()
     while not state.done():
-        team, graph = cell_snapshots(state)
-        team_msg, graph_msg = convert.team_to_msg(team), convert.graph_to_msg(graph)
+        read = wire.send(*cell_snapshots(state))
         t0 = time.perf_counter()
-        online.offer_team(team_reader.read(team_msg))
-        online.offer_graph(graph_reader.read(graph_msg))
+        team, graph = read()
+        online.offer_team(team)
+        online.offer_graph(graph)
         fallbacks = getattr(online.policy, "fallbacks", 0)
         d = online.decide(started=t0)  # the budget counts from the messages' arrival, as in the node
         seconds = time.perf_counter() - t0
@@ -206,28 +259,31 @@ def bench_node_latency(seed: int) -> None:
     print("| family | policy | decisions | p50 ms | p99 ms | max ms |")
     print("|---|---|---|---|---|---|")
     print("`auto` (1,000 ms per decision) spends its budget at each step; `auto-planner` is the node's `auto`: "
-          "its planner in a process beside, each decision dispatched from its latest plan (the first waits <= 1 s).")
+          "its planner in a process beside, each decision dispatched from its latest plan (GRP's until the first "
+          "plan comes).")
     for family in (*FAMILIES, *TRAVEL_FAMILIES):
         for policy in ("grp", "lvws", "auto", "auto-planner"):
             lat = [1000 * x for x, _ in node_latency(policy, family, 100, 500, seed)]
             print(f"| {family} | {policy} | {len(lat)} | {statistics.median(lat):.1f} | "
                   f"{float(np.percentile(lat, 99)):.1f} | {max(lat):.1f} |", flush=True)
-    print("\n`auto-planner` by what decided (the first decision waits 1 s for the best plan; `grp`: no plan "
-          "had arrived yet; `plan`: dispatched from it); back to back, and paced as a cell whose time unit takes "
-          f"{PACE:g} s of wall time")
-    print("| family | N x M | pace s | first ms | grp: decisions, p99 ms | plan: decisions, p50 ms, p99 ms, max ms |")
-    print("|---|---|---|---|---|---|")
+    print("\n`auto-planner` by what decided (`first`: the cell's first decision; `grp`: no plan had arrived yet; "
+          "`plan`: dispatched from it); back to back, and paced as a cell whose time unit takes "
+          f"{PACE:g} s of wall time; the world sends snapshots, or changes after its first snapshots")
+    print("| family | N x M | protocol | pace s | first ms | grp: decisions, p99 ms | plan: decisions, p50 ms, p99 ms, "
+          "max ms |")
+    print("|---|---|---|---|---|---|---|")
     for family in (*FAMILIES, *TRAVEL_FAMILIES):
         for pace in (0.0, PACE):
-            print(latency_by_source(family, 100, 500, seed, pace), flush=True)
+            for protocol in ("snapshots", "changes"):
+                print(latency_by_source(family, 100, 500, seed, pace, protocol), flush=True)
 
 
 PACE = 0.25  # wall seconds per unit of an instance's time in the paced latency rows
 
 
-def latency_by_source(family: str, n: int, m: int, seed: int, pace: float) -> str:
+def latency_by_source(family: str, n: int, m: int, seed: int, pace: float, protocol: str = "snapshots") -> str:
     """A table row of :func:`node_latency` for the node's ``auto``, split by what decided."""
-    lat = node_latency("auto-planner", family, n, m, seed, pace=pace)
+    lat = node_latency("auto-planner", family, n, m, seed, pace=pace, protocol=protocol)
     first = [1000 * x for x, s in lat if s == "first"]
     grp = [1000 * x for x, s in lat if s == "grp"]
     plan = [1000 * x for x, s in lat if s == "plan"]
@@ -236,7 +292,7 @@ def latency_by_source(family: str, n: int, m: int, seed: int, pace: float) -> st
         return f"{float(np.percentile(xs, 99)):.1f}" if xs else "-"
 
     pace_text = f"{pace:g}" if pace > 0 else "back to back"
-    return (f"| {family} | {n} x {m} | {pace_text} | {first[0]:.0f} | {len(grp)}, {p99(grp)} | {len(plan)}, "
+    return (f"| {family} | {n} x {m} | {protocol} | {pace_text} | {first[0]:.0f} | {len(grp)}, {p99(grp)} | {len(plan)}, "
             f"{statistics.median(plan) if plan else float('nan'):.1f}, {p99(plan)}, {max(plan, default=float('nan')):.1f} |")
 
 
@@ -297,8 +353,8 @@ if __name__ == "__main__":
     if sys.argv[1:2] == ["--one"]:
         policy, family, n, m, seed = sys.argv[2:7]
         print(json.dumps(one_run(policy, family, int(n), int(m), int(seed))))
-    elif sys.argv[1:2] == ["--latency"]:  # one row of the node's auto by what decided: FAMILY N M SEED PACE
+    elif sys.argv[1:2] == ["--latency"]:  # one row of the node's auto by what decided: FAMILY N M SEED PACE [PROTOCOL]
         family, n, m, seed, pace = sys.argv[2:7]
-        print(latency_by_source(family, int(n), int(m), int(seed), float(pace)))
+        print(latency_by_source(family, int(n), int(m), int(seed), float(pace), *sys.argv[7:8]))
     else:
         main()

@@ -73,6 +73,12 @@ class PlannedAutoPolicy:
             self.process = PlannerProcess(**self.options)
             self.process.start()
 
+    def warm_up(self) -> None:
+        """Wait (at most READY_WAIT seconds) until the planner's process has started and
+        loaded its model: a node's configure, so that the cell's first decision does not."""
+        if self.process is not None:
+            self.process.wait_ready(READY_WAIT)
+
     @property
     def planned_makespan(self) -> float:
         return self.report.makespan if self.report is not None else float("nan")

@@ -52,6 +52,10 @@ GRP_SAMPLES = 4  # randomized GRP schedules of one round when rounds are counted
 GRP_ROUND = 3  # offline, a round of randomized GRP has time for this many where one takes longer than a slice
 PROBE_DECISIONS = 3  # decision steps of a quick plan timed to estimate what it costs on the cell
 PROBE_SECONDS = 0.5  # a probe stops after this long even with fewer decision steps
+# a cell's first plan: once a probed quick plan projects a whole plan within this many seconds,
+# the others are probed with the next quick plans, not before it (an LVWS probe at 1000 x 5000
+# is one network pass over the cell, 7-8 s, which held the first plan beside a node)
+FIRST_PROBE_ENOUGH = 1.0
 PROJECT_AFTER = 1.0  # seconds into a quick plan before its finish is projected from its progress
 PROJECT_MARGIN = 3.0  # a quick plan is given up once it projects this many times the time it had
 
@@ -159,6 +163,7 @@ class Planner:
         self.quick: dict[str, tuple[float, float]] = {}  # each quick plan's (makespan, seconds), latest made
         self.quick_at: dict[str, float] = {}  # when each was made, in seconds since the planner started
         self.quick_cost: dict[str, float] = {}  # each quick plan's probed seconds per decision step, on this cell
+        self.quick_rate: dict[str, float] = {}  # and the tasks it started per step
         self.overrun, self.fallback = 0.0, ""  # the first quick plan finished past the deadline (by, which)
         self.started = time.perf_counter()
         self._instance: Instance | None = None
@@ -226,7 +231,7 @@ class Planner:
             self.base_bound = lower_bounds(state.instance).best
             self.lns_window = None
             self._pooled = None
-            self.quick_cost = {}
+            self.quick_cost, self.quick_rate = {}, {}
         self.plan = None
         if old is not None:
             try:
@@ -243,25 +248,35 @@ class Planner:
             self.quick_plans(state, -math.inf)
         return due
 
-    def quick_order(self, state: State) -> list[tuple[str, Callable[[], Policy]]]:
+    def quick_order(self, state: State, first: bool = False) -> list[tuple[str, Callable[[], Policy]]]:
         """The quick plans, the cheapest on this cell first: each one's cost per decision step,
         probed once per cell (:meth:`_probe`: its first decision steps from ``state``, timed)
-        and kept in :attr:`quick_cost`. Ties keep the listed order."""
+        and kept in :attr:`quick_cost`. Ties keep the listed order. ``first`` (the cell has no
+        plan yet): once one projects a whole plan within FIRST_PROBE_ENOUGH seconds, the rest
+        are left unprobed (last in the order) until the next call."""
         for name, make in self._quick:
-            if name not in self.quick_cost:
-                self.quick_cost[name] = self._probe(state, make)
-        return sorted(self._quick, key=lambda q: self.quick_cost[q[0]])
+            if name in self.quick_cost:
+                continue
+            if first and any(self._projected(n, state) <= FIRST_PROBE_ENOUGH for n in self.quick_cost):
+                continue
+            self.quick_cost[name], self.quick_rate[name] = self._probe(state, make)
+        return sorted(self._quick, key=lambda q: self.quick_cost.get(q[0], math.inf))
 
-    def _probe(self, state: State, make: Callable[[], Policy]) -> float:
+    def _projected(self, name: str, state: State) -> float:
+        """Seconds a whole quick plan ``name`` from ``state`` would take by its probe."""
+        return self.quick_cost[name] * len(state.tasks_to_do()) / max(self.quick_rate.get(name, 1.0), 1.0)
+
+    def _probe(self, state: State, make: Callable[[], Policy]) -> tuple[float, float]:
         """Seconds per decision step of ``make()``'s run from ``state``: the median of its
         first PROBE_DECISIONS decision steps (at most PROBE_SECONDS), timed, taken as the
         cost of each of the steps to come (a run's first steps start the most tasks, so
         seconds per task started would flatter a policy whose every step costs the same,
-        like a network's pass over the whole cell)."""
+        like a network's pass over the whole cell); and the tasks it started per step."""
         policy = make()
         policy.reset(state.instance)
         probe: State | None = state.copy()
         steps: list[float] = []
+        started = 0
         end = time.perf_counter() + PROBE_SECONDS
         while probe is not None and len(steps) < PROBE_DECISIONS and probe.tasks_to_do() \
                 and time.perf_counter() < end:
@@ -269,10 +284,11 @@ class Planner:
             try:
                 decision = policy.decide(probe)
             except PolicyError:
-                return math.inf
+                return math.inf, 1.0
             steps.append(time.perf_counter() - t0)
+            started += len(decision.assignments)
             probe = advance(probe, decision)
-        return float(np.median(steps)) if steps else 0.0
+        return (float(np.median(steps)), started / len(steps)) if steps else (0.0, 1.0)
 
     def quick_plans(self, state: State, deadline: float | None) -> None:
         """The quick plans from ``state``, cheapest first (:meth:`quick_order`), each within
@@ -281,7 +297,7 @@ class Planner:
         finished from ``state``, the cheapest runs whatever the deadline: the time it takes
         past it is :attr:`overrun`. Made, they are offered in the listed order (ties: the
         first listed)."""
-        order = self._quick if deadline is None or self.counted else self.quick_order(state)
+        order = self._quick if deadline is None or self.counted else self.quick_order(state, first=self.plan is None)
         made: dict[str, SimulationResult] = {}
         for name, make in order:
             planned = self.plan is not None and self.plan.state is state

@@ -111,6 +111,22 @@ def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], paren
             send()
 
 
+PICKLE_TRIES = 100  # a cell pickled while the decision thread fills one of its caches is pickled again
+
+
+def _send_pickled(conn: Connection, msg: tuple[Any, ...]) -> None:
+    """``conn.send(msg)`` from the sender thread while the decision thread may fill a lazy
+    cache of the cell (a dict that changes size while it is pickled: RuntimeError, nothing
+    written); tried again after a moment."""
+    for _ in range(PICKLE_TRIES - 1):
+        try:
+            conn.send(msg)
+            return
+        except RuntimeError:
+            time.sleep(0.01)
+    conn.send(msg)
+
+
 class PlannerProcess:
     """The parent's handle on the planner's child process (module docstring). What goes to
     the child is handed to a sender thread that keeps only the newest state (and the cell
@@ -157,7 +173,7 @@ class PlannerProcess:
                 self._pending = None
             try:
                 if cell is not None:
-                    conn.send(("cell", cell))
+                    _send_pickled(conn, ("cell", cell))
                 conn.send(("state", seq, payload))
             except (BrokenPipeError, ConnectionResetError, EOFError, OSError):
                 return

@@ -60,8 +60,8 @@ DESCRIPTION = (
     "LVWS scheduler node: subscribes to lvws/team_state and lvws/task_graph, publishes lvws/assignments "
     "(lvws_msgs/AssignmentArray) at every decision step, health on diagnostics; names are relative to the "
     "node's namespace. ROS parameters: " + ", ".join(
-        ["policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "ack_timeout",
-         "expect_subscribers", "managed", "use_sim_time"])
+        ["policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "first_plan_wait", "ack_timeout",
+         "retire_after", "expect_subscribers", "managed", "use_sim_time"])
     + " (--ros-args -p NAME:=VALUE or --params-file config/scheduler.yaml)."
 )
 DEFAULT_POLICY = "auto"
@@ -113,6 +113,9 @@ PARAMETERS: dict[str, Param] = {
                              "(lvws_ros/learning/sampling.py)", 0, MAX_SAMPLES),
     "beam_width": Param(int, 0, "lvws_beam: partial schedules kept at each depth of its search; 0: the search's "
                                 "default (lvws_ros/learning/search.py)", 0, MAX_BEAM_WIDTH),
+    "first_plan_wait": Param(float, 0.0, "auto (planner beside the node): seconds the cell's first decision waits "
+                                         "for the planner's first plan (0: it is GRP's at once, and the plan takes "
+                                         "over when it comes)", 0.0, 60.0),
     "ack_timeout": Param(float, 5.0, "seconds before an assignment the world did not take is offered again",
                          0.01, 3600.0),
     "expect_subscribers": Param(int, 0, "the first decision waits (at most 20 s) until this many nodes subscribe "
@@ -122,11 +125,11 @@ PARAMETERS: dict[str, Param] = {
                                   "configures and activates itself at start", read_only=True),
     "retire_after": Param(float, -1.0, "seconds after which a DONE task whose dependents have all started leaves "
                                        "the node's state, in a world that speaks changes; < 0: when the world "
-                                       "retires it", -1.0, 1e9),
+                                       "retires it", -1.0, 1e9, read_only=True),
     "use_sim_time": Param(bool, False, "rclpy's: the node's clock follows /clock"),
 }
 RUNTIME_POLICY_PARAMETERS = ("policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "beam_width",
-                             "samples")
+                             "samples", "first_plan_wait")
 SUBSCRIBER_WAIT = 20.0  # wall seconds the first decision waits for expect_subscribers
 SETTLE_SECONDS = 0.2  # wall time to wait for the matching team/graph message
 FULL_COLLECTION_EVERY = 500  # decisions between two collections of everything (frozen objects included)
@@ -211,7 +214,8 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
     if name == "lvws_sample":
         options.update(sample)
     if name == "auto":  # with a budget: the search within each decision's; without: the planner beside the node
-        options.update({"budget_ms": budget} if budget > 0 else {"background": True})
+        options.update({"budget_ms": budget} if budget > 0 else
+                       {"background": True, "first_wait": float(values.get("first_plan_wait", 0.0))})
     if name == "exact" and budget > 0:
         options["time_limit"] = budget / 1000
     fallback = values["fallback_policy"]
@@ -300,6 +304,9 @@ class SchedulerNode(LifecycleNode):
             self.get_logger().error(f"configure failed:\n{traceback.format_exc()}")
             return TransitionCallbackReturn.FAILURE
         self.error = ""
+        warm_up = getattr(policy, "warm_up", None)
+        if callable(warm_up):  # the planner's process started and its model loaded now, not in the first decision
+            warm_up()
         self.core = OnlineScheduler(policy, float(values["ack_timeout"]), fallback=fallback)
         for offer in list(self.latest.values()):
             offer()

@@ -6,6 +6,7 @@ costs on the cell at hand."""
 from __future__ import annotations
 
 import json
+import math
 import time
 
 import pytest
@@ -46,7 +47,8 @@ def test_with_no_time_at_all_the_cheapest_quick_plan_is_finished_and_the_overrun
     assert set(planner.quick) == {report.fallback}  # only the one, not the dearer ones
     # the cheapest on this cell: GRP's (LVWS's network costs more per task)
     assert report.fallback.startswith("grp")
-    assert planner.quick_cost[report.fallback] <= planner.quick_cost["lvws"]
+    # (LVWS is probed only when GRP's probe does not promise a whole plan within seconds)
+    assert planner.quick_cost[report.fallback] <= planner.quick_cost.get("lvws", math.inf)
 
 
 def test_the_dearest_quick_plan_runs_last_and_is_skipped_when_it_cannot_fit():

@@ -64,3 +64,29 @@ def test_latest_hands_over_the_newest_plan_of_those_that_arrived() -> None:
         assert check_schedule(inst, update.schedule) == []
     finally:
         proc.stop()
+
+
+class _FilledWhilePickled:
+    """A cell whose lazy cache the decision thread fills while the sender pickles it: the
+    first pickling attempts fail as a dict that changed size would make them."""
+
+    def __init__(self, failures: int) -> None:
+        self.failures = failures
+
+    def __reduce__(self) -> tuple[object, tuple[int]]:
+        if self.failures > 0:
+            self.failures -= 1
+            raise RuntimeError("dictionary changed size during iteration")
+        return (_FilledWhilePickled, (0,))
+
+
+def test_a_cell_pickled_while_its_cache_fills_is_sent_again_not_lost() -> None:
+    from multiprocessing import Pipe
+
+    from lvws_ros.planning.worker import _send_pickled
+
+    reader, writer = Pipe(duplex=False)
+    _send_pickled(writer, ("cell", _FilledWhilePickled(3)))
+    assert reader.poll(1.0)
+    kind, cell = reader.recv()
+    assert kind == "cell" and isinstance(cell, _FilledWhilePickled)

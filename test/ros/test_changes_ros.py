@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from lvws_msgs.msg import CellChanges, TaskGraph, TeamState
 from lvws_msgs.srv import Resync
+from test_runtime import read_with_anyreader, read_with_mcap
 
 from lvws_ros.cli.bench_scale import cell_snapshots
 from lvws_ros.cli.report import report
@@ -20,8 +21,6 @@ from lvws_ros.core.datasets import random_instance
 from lvws_ros.core.executor import State, schedule_from_state
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.ros import convert, topics
-from test_runtime import read_with_anyreader, read_with_mcap
-
 from scheduler_probe import scheduler_probe
 
 pytestmark = pytest.mark.ros  # crosses processes over real DDS
@@ -61,6 +60,11 @@ class ChangeWorld:
         return res
 
 
+def answered(got: list[Any], seen: int, stamp: float) -> Any:
+    """Whether a decision for the state stamped ``stamp`` came after the first ``seen``."""
+    return lambda: any(abs(convert.from_time(m.team_stamp) - stamp) < 1e-9 for m in got[seen:])
+
+
 def test_a_late_node_that_misses_changes_and_gets_a_bad_one_resyncs_and_finishes_the_cell_valid(ros_context):
     inst = random_instance(np.random.default_rng(3), 6, 30, "changes")
     with scheduler_probe(ros_context, "change_world", ["-p", "policy:=grp", "-p", "ack_timeout:=60.0"]) as probe:
@@ -81,8 +85,7 @@ def test_a_late_node_that_misses_changes_and_gets_a_bad_one_resyncs_and_finishes
             else:
                 world.publish()
             seen = len(probe.got)
-            probe.spin(3.0, lambda: any(abs(convert.from_time(m.team_stamp) - stamp) < 1e-9
-                                        for m in probe.got[seen:]))
+            probe.spin(3.0, answered(probe.got, seen, stamp))
             for m in probe.got[seen:]:
                 if abs(convert.from_time(m.team_stamp) - stamp) > 1e-9:
                     continue
