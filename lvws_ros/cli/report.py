@@ -109,7 +109,7 @@ def executed(teams: Sequence[TeamSnapshot], graph: GraphSnapshot, name: str = "r
 def report_run(run: Run) -> RunReport:
     if not run.teams or not run.graphs:
         raise BagError(f"{run.path}: no team state or task graph recorded")
-    graph = run.graphs[-1]
+    graph = run.whole_graph()  # done work that retired included
     # a world on wall time (a dispatcher's: seconds since 1970) counts from its first state
     origin = run.teams[0].stamp if run.teams[0].stamp > WALL_CLOCK else 0.0
     inst, sched = executed(run.teams, graph, run.path.name, origin)

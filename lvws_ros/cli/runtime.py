@@ -140,13 +140,18 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from lvws_ros.cli.report import report
     from lvws_ros.ros.launcher import launch
 
+    if args.retire_after >= 0 and args.protocol != "changes":
+        print("lvws launch: --retire-after needs --protocol changes (a snapshot world sends every task)",
+              file=sys.stderr)
+        return 2
+
     try:
         res = launch(policy=args.policy, seed=args.seed, model_path=args.model or "", rate=args.rate,
                      config=args.config or "", bag_dir=args.bag_dir, out_dir=args.out_dir, name=args.name,
                      params_file=args.params_file, gif=not args.no_gif, timeout=args.timeout,
                      sync=not args.no_sync, namespace=args.namespace, domain_id=args.domain_id,
                      events=args.events, dashboard=args.dashboard, robots=args.robots, instance=args.instance or "",
-                     protocol=args.protocol)
+                     protocol=args.protocol, retire_after=args.retire_after)
     except LaunchError as exc:
         print(f"lvws launch: failed: {exc}", file=sys.stderr)
         return 1
@@ -283,6 +288,9 @@ def _add_launch(add: Adder) -> None:
     p.add_argument("--protocol", choices=("snapshots", "changes"), default="snapshots",
                    help="how the simulator sends the cell's state: its whole team and task graph at every step, or "
                         "numbered changes after the first snapshots (docs/ros.md)")
+    p.add_argument("--retire-after", type=float, default=-1.0, metavar="SECONDS",
+                   help="with --protocol changes: done work retires from the live cell this many sim seconds after "
+                        "it ended, once its dependents have started (default -1: never); the bag keeps it")
     p.add_argument("--events", default=None, help="scripted world events (YAML: at t, submit / cancel / fail / "
                                                    "repair); see lvws_ros/sim/events.py")
     p.add_argument("--dashboard", type=int, nargs="?", const=DEFAULT_PORT, default=None, metavar="PORT",

@@ -639,8 +639,9 @@ class OnlineScheduler:
             now = {t.id: t for t in snap.tasks}
             if set(now) - set(before):
                 self.changes.append(f"task(s) {', '.join(sorted(set(now) - set(before)))} added")
-            if set(before) - set(now):
-                self.changes.append(f"task(s) {', '.join(sorted(set(before) - set(now)))} removed (cancelled)")
+            gone = sorted(k for k in set(before) - set(now) if before[k].status != TaskStatus.DONE)
+            if gone:  # a DONE task that leaves retired: not news
+                self.changes.append(f"task(s) {', '.join(gone)} removed (cancelled)")
             back = sorted(k for k, t in now.items() if t.status == _READY and not t.assigned_robots
                           and k in before and before[k].status == _ASSIGNED)
             if back:

@@ -8,7 +8,7 @@ nodes use.
 from __future__ import annotations
 
 import shutil
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -19,8 +19,8 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from lvws_ros.core.changes import CellChanges, LiveCell
-from lvws_ros.core.online import GraphSnapshot, OnlineDecision, TeamSnapshot
+from lvws_ros.core.changes import CellChanges, ChangeRefused, LiveCell
+from lvws_ros.core.online import GraphSnapshot, OnlineDecision, TaskInfo, TeamSnapshot
 from lvws_ros.errors import BagError
 from lvws_ros.ros.convert import (
     changes_from_msg,
@@ -189,25 +189,48 @@ class Run:
     duration_ns: int = 0
     namespace: str = "/"  # the cell's namespace (its topics' prefix)
     changes: list[CellChanges] = field(default_factory=list)  # a world that speaks changes (CellChanges)
+    retired: list[TaskInfo] = field(default_factory=list)  # done work that left the live cell, as last said
+    said_prerequisites: dict[str, tuple[str, ...]] = field(default_factory=dict)  # before retirement stripped them
+
+    def whole_graph(self) -> GraphSnapshot:
+        """The last task graph with the tasks that retired before it (their prerequisites as
+        the world said them): every task the run ever held."""
+        last = self.graphs[-1]
+        if not self.retired:
+            return last
+        live = tuple(replace(t, prerequisites=self.said_prerequisites.get(t.id, t.prerequisites)) for t in last.tasks)
+        return replace(last, tasks=tuple(self.retired) + live)
 
 
 def _replay_changes(run: Run) -> None:
     """A bag of a world that speaks changes: its first snapshots and the changes after them
-    become the snapshots each change gives (``teams``/``graphs`` as a snapshot world's)."""
+    become the snapshots each change gives (``teams``/``graphs`` as a snapshot world's); the
+    tasks that retired are kept aside (:meth:`Run.whole_graph`)."""
     if not run.changes or not run.teams or not run.graphs:
         return
     cell = LiveCell(run.teams[0], run.graphs[0])
     teams, graphs = [run.teams[0]], [run.graphs[0]]
+    said = {t.id: t for t in run.graphs[0].tasks}  # each task as the world last sent it
     for ch in sorted(run.changes, key=lambda c: c.seq):
         if ch.seq <= cell.seq:
             continue
         if ch.seq != cell.seq + 1:
             raise BagError(f"{run.path}: CellChanges {cell.seq + 1}-{ch.seq - 1} are not in the bag")
-        cell.apply(ch)
+        try:
+            cell.apply(ch)
+        except ChangeRefused as exc:
+            raise BagError(f"{run.path}: {exc}") from None
+        said.update((t.id, t) for t in ch.tasks)
+        for tid in ch.retired:
+            run.retired.append(said.pop(tid))
+        for tid in ch.cancelled:
+            said.pop(tid, None)
         team, graph = cell.snapshots()
         teams.append(team)
         graphs.append(graph)
     run.teams, run.graphs = teams, graphs
+    run.said_prerequisites = {t.id: said[t.id].prerequisites for t in graphs[-1].tasks
+                              if t.id in said and said[t.id].prerequisites != t.prerequisites}
 
 
 def _add(run: Run, topic: str, msg: Any) -> None:

@@ -38,7 +38,7 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
-from lvws_ros.core.changes import changes_between
+from lvws_ros.core.changes import LiveCell, changes_between
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
 from lvws_ros.errors import AssignmentRejected, ConfigError, LvwsError, WorldEventRejected
@@ -57,7 +57,8 @@ DESCRIPTION = (
     "max_sim_time (s), summary (JSON path), gif (animated GIF path), frame_every (sim s between GIF frames), "
     "events (scripted world events, YAML), stuck_grace (wall s a run waits for a repair after a service made a "
     "task impossible, default 10), protocol (snapshots: the whole state at every step; changes: numbered "
-    "CellChanges after the first snapshots, which the resync service gives again)."
+    "CellChanges after the first snapshots, which the resync service gives again), retire_after (changes only: "
+    "sim s after which done work retires once its dependents have started, default -1: never)."
 )
 PROTOCOLS = ("snapshots", "changes")  # how the cell's state goes out (parameter protocol)
 PROGRESS_SECONDS = 2.0  # wall seconds between progress lines (lvws launch shows them)
@@ -131,6 +132,11 @@ class CellSimNode(Node):
             raise LvwsError(f"parameter protocol: one of {', '.join(PROTOCOLS)}, got {self.protocol!r}")
         self.seq = 0  # the last CellChanges published
         self.sent: tuple[TeamSnapshot, GraphSnapshot] | None = None  # the cell as of it
+        # changes only: DONE tasks retire this many sim seconds after they end once their
+        # dependents have all started (LiveCell.retire); negative: never
+        self.retire_after = float(self.declare_parameter("retire_after", -1.0).value)
+        self.said: LiveCell | None = None  # the cell as the batches sent so far describe it
+        self.retired: set[str] = set()
         self.changes_pub = self.create_publisher(CellChanges, topics.CHANGES_TOPIC, topics.CHANGES_QOS)
         self.create_service(Resync, topics.RESYNC_SERVICE, self.on_resync)
         self.team_pub = self.create_publisher(TeamState, topics.TEAM_TOPIC, topics.TEAM_QOS)
@@ -180,11 +186,23 @@ class CellSimNode(Node):
             self.team_pub.publish(convert.team_to_msg(team, self.frame))
 
     def publish_changes(self, now: tuple[TeamSnapshot, GraphSnapshot]) -> None:
-        """What changed since the last state sent, as the next CellChanges."""
+        """What changed since the last state sent, as the next CellChanges (with the done
+        work that retires, ``retire_after``)."""
         assert self.sent is not None
+        team, graph = now
+        if self.retire_after >= 0:
+            if self.said is None:
+                self.said = LiveCell(*self.sent)
+            self.retired.update(self.said.retire(self.retire_after))
+            graph = replace(graph, tasks=tuple(
+                replace(t, prerequisites=tuple(p for p in t.prerequisites if p not in self.retired))
+                for t in graph.tasks if t.id not in self.retired))
         self.seq += 1
-        self.changes_pub.publish(convert.changes_to_msg(changes_between(self.sent, now, self.seq), self.frame))
-        self.sent = now
+        batch = changes_between(self.sent, (team, graph), self.seq)
+        if self.said is not None:  # it retired them already
+            self.said.apply(replace(batch, retired=()))
+        self.changes_pub.publish(convert.changes_to_msg(batch, self.frame))
+        self.sent = (team, graph)
 
     def on_resync(self, req: Resync.Request, res: Resync.Response) -> Resync.Response:
         """The cell as of the last CellChanges sent (before any: as it is now, change 0)."""

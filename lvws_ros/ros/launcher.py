@@ -109,7 +109,7 @@ def _tail(path: Path, lines: int = 15) -> str:
 def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: str, rate: float, config: str,
               file_params: dict[str, Any], summary: Path, gif: Path | None, sync: bool,
               namespace: str = "", events: str | None = None, dashboard: int | None = None,
-              protocol: str = "snapshots") -> dict[str, list[str]]:
+              protocol: str = "snapshots", retire_after: float = -1.0) -> dict[str, list[str]]:
     """The children's command lines, recorder first, simulator last (the dashboard, when
     asked for, before the simulator)."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
@@ -124,7 +124,8 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
     sched: dict[str, object] = {**defaults, **file_params, **explicit}
     sched_params = [a for k, v in sched.items() for a in ("-p", f"{k}:={_param(v)}")]
     sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary}", "-p", f"expect_subscribers:={audience}",
-                  "-p", f"sync:={'true' if sync else 'false'}", "-p", f"protocol:={protocol}"]
+                  "-p", f"sync:={'true' if sync else 'false'}", "-p", f"protocol:={protocol}",
+                  "-p", f"retire_after:={float(retire_after)}"]
     if gif is not None:
         sim_params += ["-p", f"gif:={gif}"]
     if config:
@@ -301,7 +302,7 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
            params_file: str | None = None, gif: bool = True, timeout: float = 600.0,
            domain_id: int | None = None, sync: bool = True, namespace: str = "", events: str | None = None,
            dashboard: int | None = None, robots: str = "sim", instance: str = "", protocol: str = "snapshots",
-           log: Any = print) -> LaunchResult:
+           retire_after: float = -1.0, log: Any = print) -> LaunchResult:
     """Run the case study end to end; raises LaunchError (children stopped) on failure.
     The configuration, the parameter file, the policy, the model and the namespace are
     checked before any process starts (ConfigError / PolicyError). ``policy``/``seed``
@@ -310,7 +311,8 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     printed URL carries it). ``robots="actions"``: the dispatcher and fake robots (ExecuteTask
     servers at ``rate``) instead of the simulator, on the cell ``instance`` (an
     lvws-instance/1 file; default: the simulator's cell written as one), on wall time.
-    ``protocol="changes"``: the simulator sends numbered changes after its first snapshots."""
+    ``protocol="changes"``: the simulator sends numbered changes after its first snapshots
+    (``retire_after`` >= 0: with done work retiring that many sim seconds after it ended)."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
 
     namespace = check_namespace(namespace, "--namespace")
@@ -322,7 +324,8 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     gif_path = out / "run.gif"
     commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
                          file_params=in_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
-                         namespace=namespace, events=events, dashboard=dashboard, protocol=protocol)
+                         namespace=namespace, events=events, dashboard=dashboard, protocol=protocol,
+                         retire_after=retire_after)
     if robots == "actions":
         commands = _actions_commands(commands, actions_cell(out, config, instance), rate, summary_path, namespace,
                                      3 if dashboard is not None else 2)

@@ -132,6 +132,7 @@ RUNTIME_POLICY_PARAMETERS = ("policy", "fallback_policy", "model_path", "seed", 
                              "samples", "first_plan_wait")
 SUBSCRIBER_WAIT = 20.0  # wall seconds the first decision waits for expect_subscribers
 SETTLE_SECONDS = 0.2  # wall time to wait for the matching team/graph message
+LOG_NAMES = 12  # assignments and waiting robots named in a decision's log line (the rest counted)
 FULL_COLLECTION_EVERY = 500  # decisions between two collections of everything (frozen objects included)
 
 
@@ -585,8 +586,11 @@ class SchedulerNode(LifecycleNode):
         decision = replace(decision, state_latency=time.perf_counter() - self.step_started)
         self.last_state_latency = decision.state_latency
         self.pub.publish(convert.decision_to_msg(decision, convert.to_time(stamp)))
-        made = ", ".join(f"{t}<-{'+'.join(r)}" for t, r in decision.assignments) or "-"
-        self.get_logger().info(f"step {decision.step}: {made}; waiting {', '.join(decision.waiting) or '-'} "
+        made = ", ".join(f"{t}<-{'+'.join(r)}" for t, r in decision.assignments[:LOG_NAMES]) or "-"
+        made += f" (+{len(decision.assignments) - LOG_NAMES} more)" if len(decision.assignments) > LOG_NAMES else ""
+        waiting = ", ".join(decision.waiting[:LOG_NAMES]) or "-"
+        waiting += f" (+{len(decision.waiting) - LOG_NAMES} more)" if len(decision.waiting) > LOG_NAMES else ""
+        self.get_logger().info(f"step {decision.step}: {made}; waiting {waiting} "
                                f"({1000 * decision.latency:.1f} ms)")
         collect_after_decision(decision.step + 1)
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -68,9 +69,15 @@ def scheduler_probe(ros_context: Any, name: str, ros_args: Sequence[str], namesp
     node.create_subscription(AssignmentArray, ASSIGNMENTS_TOPIC, probe.got.append, reliable)
     node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS_TOPIC,
                              on_diagnostics, reliable)
+    # the node's output is read as it comes: a pipe nobody reads fills up and blocks the node
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout or ()), daemon=True)
+    reader.start()
     try:
         yield probe
     finally:
         proc.send_signal(signal.SIGINT)
-        probe.output, _ = proc.communicate(timeout=30)
+        proc.wait(timeout=30)
+        reader.join(timeout=10)
+        probe.output = "".join(lines)
         node.destroy_node()

@@ -5,7 +5,10 @@ end and its bag is read back by two readers."""
 
 from __future__ import annotations
 
-import time
+import signal
+import subprocess
+import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -15,7 +18,7 @@ from lvws_msgs.srv import Resync
 from test_runtime import read_with_anyreader, read_with_mcap
 
 from lvws_ros.cli.bench_scale import cell_snapshots
-from lvws_ros.cli.report import report
+from lvws_ros.cli.report import report, verify
 from lvws_ros.core import changes
 from lvws_ros.core.datasets import random_instance
 from lvws_ros.core.executor import State, schedule_from_state
@@ -111,17 +114,110 @@ def test_a_late_node_that_misses_changes_and_gets_a_bad_one_resyncs_and_finishes
     assert all(convert.from_time(m.state_latency) > 0 for m in probe.got)
 
 
-def test_the_simulator_speaks_changes_end_to_end_and_its_bag_reads_back(tmp_path):
+def test_the_simulator_speaks_changes_with_done_work_retiring_and_its_bag_reads_back(tmp_path):
+    from lvws_ros.ros.bag import read_run
     from lvws_ros.ros.launcher import launch
 
     res = launch(policy="grp", rate=20.0, bag_dir=tmp_path / "bags", out_dir=tmp_path / "out", name="changes",
-                 gif=False, timeout=300.0, protocol="changes", log=lambda _t: None)
+                 gif=False, timeout=300.0, protocol="changes", retire_after=0.0, log=lambda _t: None)
     s = res.summary
     assert s["tasks_done"] == 14 and s["error"] == "" and s["rejected"] == []
     a, b = read_with_anyreader(res.bag), read_with_mcap(res.bag)
     assert a == b and a["/lvws/changes"] >= 10 and a["/lvws/task_graph"] == 1  # the first snapshot, then changes
-    rep = report(res.bag)
+    run = read_run(res.bag)
+    retired = [tid for ch in run.changes for tid in ch.retired]
+    assert len(retired) >= 7 and len(set(retired)) == len(retired)  # done work left the live cell, once each
+    assert len(run.graphs[-1].tasks) < 14
+    rep = report(res.bag)  # the bag keeps everything: the retired tasks are in the report
     assert rep.complete and len(rep.schedule.assignments) == 14
     assert check_schedule(rep.instance, rep.schedule) == []
     assert rep.schedule.makespan == pytest.approx(s["makespan"], abs=1e-6)
-    time.sleep(0)  # the run is over: nothing else to wait for
+
+
+STREAM_DONE = 2500  # tasks done over DDS before the stream stops: a few thousand, in about a minute
+
+
+def _rss_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+class StreamOverDds:
+    """The stream world (sim/stream.py) on the wire: its first snapshots on the latched
+    topics, then one CellChanges per tick, the resync service; the node's assignments
+    started in it."""
+
+    def __init__(self, probe: Any, world: Any) -> None:
+        self.probe, self.world, self.seq = probe, world, 0
+        self.pub = probe.node.create_publisher(CellChanges, topics.CHANGES_TOPIC, topics.CHANGES_QOS)
+        probe.node.create_service(Resync, topics.RESYNC_SERVICE, self.on_resync)
+        self.started: set[str] = set()
+        self.twice = 0
+
+    def on_resync(self, _req: Any, res: Any) -> Any:
+        team, graph = self.world.snapshots()
+        res.team, res.graph, res.seq = convert.team_to_msg(team), convert.graph_to_msg(graph), self.seq
+        return res
+
+    def tick(self) -> bool:
+        """One tick of the world; whether the node answered it (or had nothing to do)."""
+        w, probe = self.world, self.probe
+        w.advance()
+        self.seq += 1
+        self.pub.publish(convert.changes_to_msg(w.changes(self.seq)))
+        seen = len(probe.got)
+        due = any(r.available for r in w.robots.values()) and any(t.status == 1 for t in w.tasks.values())
+        probe.spin(1.0 if due else 0.01, answered(probe.got, seen, w.time) if due else lambda: False)
+        for m in probe.got[seen:]:
+            for a in m.assignments:
+                self.twice += a.task_id in self.started
+                self.started.add(a.task_id)
+                w.assign(a.task_id, tuple(a.robot_ids))  # AssignmentRejected: the test fails
+        return not due or len(probe.got) > seen
+
+
+def test_a_stream_of_thousands_of_tasks_over_dds_all_done_none_twice_the_node_flat_and_the_bag_verifies(
+        ros_context, tmp_path):
+    """A world that never stops (sim/stream.py) over DDS, recorded: done work retires, none
+    is assigned twice, the node's resident memory from a third of the tasks done to the end
+    stays within a few MiB (the figures are the stream benchmark's); then the stream stops,
+    the cell drains, and the bag's report holds every task, done, valid."""
+    import math
+
+    from lvws_ros.sim.stream import StreamWorld
+
+    bag = tmp_path / "stream"
+    rec = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag)], stdout=subprocess.PIPE,
+                           text=True)
+    assert rec.stdout is not None and "recording to" in rec.stdout.readline()
+    world = StreamWorld(100, 0.4, seed=2)
+    with scheduler_probe(ros_context, "stream_world", ["-p", "policy:=grp", "-p", "ack_timeout:=60.0"]) as probe:
+        wire = StreamOverDds(probe, world)
+        probe.spin(60.0, lambda: wire.pub.get_subscription_count() >= 2)  # the node and the recorder
+        team, graph = world.snapshots()  # a world may mix: snapshots at start, changes after
+        probe.team_pub.publish(convert.team_to_msg(team))
+        probe.graph_pub.publish(convert.graph_to_msg(graph))
+        rss: dict[int, float] = {}
+        unanswered = 0
+        while unanswered < 20 and any(t.end is None for t in world.tasks.values()) | (world.counts.done < STREAM_DONE):
+            unanswered = 0 if wire.tick() else unanswered + 1
+            for mark in (STREAM_DONE // 3, STREAM_DONE):
+                if world.counts.done >= mark and mark not in rss:
+                    rss[mark] = _rss_mib(probe.proc.pid)
+                    if mark == STREAM_DONE:
+                        world.next_arrival = math.inf  # the stream stops: the cell drains
+        probe.spin(1.5)
+    rec.send_signal(signal.SIGINT)
+    rec.wait(timeout=60)
+    c = world.counts
+    assert wire.twice == 0 and c.rejected == 0, (wire.twice, c)
+    assert c.done == c.added >= STREAM_DONE, (c, probe.diags[-10:], probe.output[-4000:])
+    assert c.retired > STREAM_DONE // 2 and max(int(v.get("retired", 0)) for v in probe.values) > STREAM_DONE // 2
+    assert rss[STREAM_DONE] - rss[STREAM_DONE // 3] < 30, rss
+    rep = report(bag)
+    assert rep.complete and len(rep.schedule.assignments) == c.added
+    assert check_schedule(rep.instance, rep.schedule) == []
+    n, bad = verify(bag)  # the decisions replayed offline from the bag's rebuilt states
+    assert n > 100 and bad == [], (n, bad[:3])
