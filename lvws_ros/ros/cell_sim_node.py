@@ -27,24 +27,22 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import rclpy
-from lvws_msgs.msg import AssignmentArray, CellChanges, TaskGraph, TeamState
-from lvws_msgs.srv import CancelTask, Resync, SetRobotFault, SubmitTasks
+from lvws_msgs.msg import AssignmentArray
+from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitTasks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
-from lvws_ros.core.changes import LiveCell, changes_between
 from lvws_ros.core.executor import TaskStatus
-from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
 from lvws_ros.errors import AssignmentRejected, ConfigError, LvwsError, WorldEventRejected
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main, spin_once
 from lvws_ros.ros.resources import case_study_config
+from lvws_ros.ros.state_publisher import StatePublisher
 from lvws_ros.sim.config import ARM_KINDS, load_cell_config
 from lvws_ros.sim.events import WorldEvent, apply_event, load_events, stuck_reason
 from lvws_ros.sim.world import CellSim, Event
@@ -60,7 +58,6 @@ DESCRIPTION = (
     "CellChanges after the first snapshots, which the resync service gives again), retire_after (changes only: "
     "sim s after which done work retires once its dependents have started, default -1: never)."
 )
-PROTOCOLS = ("snapshots", "changes")  # how the cell's state goes out (parameter protocol)
 PROGRESS_SECONDS = 2.0  # wall seconds between progress lines (lvws launch shows them)
 ROBOT_COLORS = {"panda": (1.0, 0.5, 0.0), "jackal": (0.1, 0.4, 0.9), "husky": (0.1, 0.7, 0.2)}
 
@@ -127,20 +124,9 @@ class CellSimNode(Node):
         self.frame = self.sim.cfg.frame_id
         # "snapshots": the whole team and task graph at every state; "changes": those once, then
         # numbered CellChanges, with the snapshots on request (the resync service; docs/ros.md)
-        self.protocol = str(self.declare_parameter("protocol", "snapshots").value)
-        if self.protocol not in PROTOCOLS:
-            raise LvwsError(f"parameter protocol: one of {', '.join(PROTOCOLS)}, got {self.protocol!r}")
-        self.seq = 0  # the last CellChanges published
-        self.sent: tuple[TeamSnapshot, GraphSnapshot] | None = None  # the cell as of it
-        # changes only: DONE tasks retire this many sim seconds after they end once their
-        # dependents have all started (LiveCell.retire); negative: never
-        self.retire_after = float(self.declare_parameter("retire_after", -1.0).value)
-        self.said: LiveCell | None = None  # the cell as the batches sent so far describe it
-        self.retired: set[str] = set()
-        self.changes_pub = self.create_publisher(CellChanges, topics.CHANGES_TOPIC, topics.CHANGES_QOS)
-        self.create_service(Resync, topics.RESYNC_SERVICE, self.on_resync)
-        self.team_pub = self.create_publisher(TeamState, topics.TEAM_TOPIC, topics.TEAM_QOS)
-        self.graph_pub = self.create_publisher(TaskGraph, topics.GRAPH_TOPIC, topics.GRAPH_QOS)
+        self.out = StatePublisher(self, lambda: (self.sim.team_snapshot(), self.sim.graph_snapshot()),
+                                  str(self.declare_parameter("protocol", "snapshots").value),
+                                  float(self.declare_parameter("retire_after", -1.0).value), self.frame)
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK_TOPIC, topics.CLOCK_QOS)
         self.marker_pub = self.create_publisher(MarkerArray, topics.MARKERS_TOPIC, topics.MARKERS_QOS)
         self.create_subscription(AssignmentArray, topics.ASSIGNMENTS_TOPIC, self.on_assignments,
@@ -168,48 +154,12 @@ class CellSimNode(Node):
         gets a state from its future, and answers it no earlier than its stamp."""
         self.last_stamp = self.sim.time
         self.publish_clock()
-        team, graph = self.sim.team_snapshot(), self.sim.graph_snapshot()
-        if self.protocol == "changes" and self.sent is not None:
-            self.publish_changes((team, graph))
-            return
-        self.team_pub.publish(convert.team_to_msg(team, self.frame))
-        self.graph_pub.publish(convert.graph_to_msg(graph, self.frame))
-        self.sent = (team, graph)
+        self.out.publish(self.sim.team_snapshot(), self.sim.graph_snapshot())
 
     def publish_team(self) -> None:
         """The team alone (robots moved), as a snapshot or as a change."""
         self.publish_clock()
-        team = self.sim.team_snapshot()
-        if self.protocol == "changes" and self.sent is not None:
-            self.publish_changes((team, replace(self.sent[1], stamp=team.stamp)))
-        else:
-            self.team_pub.publish(convert.team_to_msg(team, self.frame))
-
-    def publish_changes(self, now: tuple[TeamSnapshot, GraphSnapshot]) -> None:
-        """What changed since the last state sent, as the next CellChanges (with the done
-        work that retires, ``retire_after``)."""
-        assert self.sent is not None
-        team, graph = now
-        if self.retire_after >= 0:
-            if self.said is None:
-                self.said = LiveCell(*self.sent)
-            self.retired.update(self.said.retire(self.retire_after))
-            graph = replace(graph, tasks=tuple(
-                replace(t, prerequisites=tuple(p for p in t.prerequisites if p not in self.retired))
-                for t in graph.tasks if t.id not in self.retired))
-        self.seq += 1
-        batch = changes_between(self.sent, (team, graph), self.seq)
-        if self.said is not None:  # it retired them already
-            self.said.apply(replace(batch, retired=()))
-        self.changes_pub.publish(convert.changes_to_msg(batch, self.frame))
-        self.sent = (team, graph)
-
-    def on_resync(self, req: Resync.Request, res: Resync.Response) -> Resync.Response:
-        """The cell as of the last CellChanges sent (before any: as it is now, change 0)."""
-        team, graph = self.sent or (self.sim.team_snapshot(), self.sim.graph_snapshot())
-        res.team, res.graph = convert.team_to_msg(team, self.frame), convert.graph_to_msg(graph, self.frame)
-        res.seq = self.seq
-        return res
+        self.out.publish_team(self.sim.team_snapshot())
 
     def publish_clock(self) -> None:
         self.clock_pub.publish(Clock(clock=convert.to_time(self.sim.time)))
@@ -316,11 +266,11 @@ class CellSimNode(Node):
 
     def start(self) -> None:
         """Once the scheduler and recorder subscribe (or the wait is over): the first state."""
-        subs = topics.state_audience(self.team_pub, self.graph_pub)
+        subs = topics.state_audience(self.out.team_pub, self.out.graph_pub)
         if subs < self.expect_subs and time.monotonic() - self.start_wall < self.wait_subs:
             return  # give the scheduler and recorder time to discover us
         self.started = True
-        self.get_logger().info(f"starting: {subs} subscriber(s) on {self.team_pub.topic_name}, rate {self.rate:g}x")
+        self.get_logger().info(f"starting: {subs} subscriber(s) on {self.out.team_pub.topic_name}, rate {self.rate:g}x")
         self.publish_state()
         self.publish_markers()
         if self.sync and self.decision_due():

@@ -321,6 +321,7 @@ class LiveFeed:
                 del view.diagnostics[:-KEPT_DIAGNOSTICS]
 
         n = self.node
+        self.follow_changes(view)
         n.create_subscription(TeamState, topics.TEAM_TOPIC, add("teams", convert.team_from_msg), topics.TEAM_QOS)
         n.create_subscription(TaskGraph, topics.GRAPH_TOPIC, add("graphs", convert.graph_from_msg), topics.GRAPH_QOS)
         n.create_subscription(AssignmentArray, topics.ASSIGNMENTS_TOPIC, add("decisions", convert.decision_from_msg),
@@ -331,6 +332,50 @@ class LiveFeed:
         self.executor.add_node(n)
         self.thread = threading.Thread(target=self._spin, name="dashboard-ros", daemon=True)
         self.thread.start()
+
+    def follow_changes(self, view: CellView) -> None:
+        """A world that speaks changes (docs/ros.md): its batches followed in order, the
+        world's snapshots asked for on the resync service at the first batch, on a gap or on
+        a batch that cannot apply; the cell they describe shown as the latest team and graph."""
+        from lvws_msgs.msg import CellChanges
+        from lvws_msgs.srv import Resync
+
+        from lvws_ros.core.changes import ChangeFollower
+        from lvws_ros.ros import convert, topics
+
+        follower, log = ChangeFollower(), self.node.get_logger()
+        asking: list[Any] = []  # the resync call in flight
+        client = self.node.create_client(Resync, topics.RESYNC_SERVICE)
+
+        def show() -> None:
+            while follower.notices:
+                log.warning(follower.notices.pop(0))
+            if follower.cell is not None and not follower.needs_resync:
+                team, graph = follower.cell.snapshots()
+                view.take("teams", team)
+                view.take("graphs", graph)
+
+        def resynced(future: Any) -> None:
+            asking.clear()
+            res = future.result()
+            try:
+                follower.resync(convert.team_from_msg(res.team), convert.graph_from_msg(res.graph), int(res.seq))
+            except LvwsError as exc:
+                log.warning(f"resync snapshots ignored: {exc}")
+            show()
+
+        def take(msg: Any) -> None:
+            try:
+                follower.take(convert.changes_from_msg(msg))
+            except (TypeError, ValueError) as exc:
+                log.warning(f"CellChanges {msg.seq} ignored: {exc}")
+                follower.needs_resync = True
+            if follower.needs_resync and not asking and client.service_is_ready():
+                asking.append(client.call_async(Resync.Request()))
+                asking[0].add_done_callback(resynced)
+            show()
+
+        self.node.create_subscription(CellChanges, topics.CHANGES_TOPIC, take, topics.CHANGES_QOS)
 
     def _spin(self) -> None:
         from rclpy.executors import ExternalShutdownException

@@ -20,7 +20,7 @@ from action_msgs.msg import GoalInfo, GoalStatus
 from action_msgs.srv import CancelGoal
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lvws_msgs.action import ExecuteTask
-from lvws_msgs.msg import AssignmentArray, GoalEvent, TaskGraph, TeamState
+from lvws_msgs.msg import AssignmentArray, GoalEvent
 from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitInstanceTasks
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.action import ActionClient
@@ -34,6 +34,7 @@ from lvws_ros.core.formats import load_instance
 from lvws_ros.errors import ConfigError, DispatchRefused, LvwsError
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main, spin_once
+from lvws_ros.ros.state_publisher import StatePublisher
 
 __all__ = ["DispatcherNode", "free_by_answer", "main"]
 
@@ -105,8 +106,13 @@ class DispatcherNode(Node):
         if self.cell.inst.departure != "together":  # the messages carry no departure: goals go to free robots
             self.get_logger().warning(f"{path}: \"departure\": \"{self.cell.inst.departure}\" is planned offline "
                                       "only; this cell's subteams are sent off together (docs/formats.md)")
-        self.team_pub = self.create_publisher(TeamState, topics.TEAM_TOPIC, topics.TEAM_QOS)
-        self.graph_pub = self.create_publisher(TaskGraph, topics.GRAPH_TOPIC, topics.GRAPH_QOS)
+        self.out = StatePublisher(
+            self, lambda: (self.cell.team_snapshot(self.now()), self.cell.graph_snapshot(self.now())),
+            str(_param(self, "protocol", "snapshots", "how the state goes out: snapshots (the whole team and task "
+                       "graph each time) or changes (those once, then numbered CellChanges; docs/ros.md)")),
+            float(_param(self, "retire_after", -1.0, "protocol changes: seconds after which done work retires "
+                         "once its dependents have started (-1: never)")),
+            self.frame_id)
         self.events_pub = self.create_publisher(GoalEvent, topics.GOAL_EVENTS_TOPIC, topics.GOAL_EVENTS_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, topics.DIAGNOSTICS_QOS)
         self.create_subscription(AssignmentArray, topics.ASSIGNMENTS_TOPIC, self.on_assignments,
@@ -143,16 +149,18 @@ class DispatcherNode(Node):
         team = self.cell.team_snapshot(now)
         if not self.audience():
             return
-        if team.robots:
-            self.team_pub.publish(convert.team_to_msg(team, self.frame_id))
-        self.graph_pub.publish(convert.graph_to_msg(self.cell.graph_snapshot(now), self.frame_id))
+        graph = self.cell.graph_snapshot(now)
+        if not team.robots and (self.out.sent is None or self.out.protocol == "snapshots"):
+            self.out.graph_pub.publish(convert.graph_to_msg(graph, self.frame_id))  # no robot up: no team yet
+            return
+        self.out.publish(team, graph)
 
     def audience(self) -> bool:
         """Whether the expected subscribers are there (or 20 s went by): a bag then holds
         the first state."""
         if not self.waiting:
             return True
-        subs = topics.state_audience(self.team_pub, self.graph_pub)
+        subs = topics.state_audience(self.out.team_pub, self.out.graph_pub)
         if subs >= self.expect_subs or time.monotonic() - self.started_wall > WAIT_FOR_SUBSCRIBERS:
             self.waiting = False
             self.get_logger().info(f"publishing to {subs} subscriber(s)")

@@ -171,12 +171,15 @@ def _actions_commands(commands: dict[str, list[str]], cell: Path, rate: float, s
         return [a for k, a in enumerate(cmd) if k not in drop and k + 1 not in drop]
 
     out = {name: wall(cmd) for name, cmd in commands.items() if name != "cell_sim"}
+    sim = commands["cell_sim"]  # the world's protocol, the same for the dispatcher
+    protocol = [x for k, a in enumerate(sim) if k and sim[k - 1] == "-p"
+                and a.startswith(("protocol:=", "retire_after:=")) for x in ("-p", a)]
     ns = ["-r", f"__ns:={namespace}"] if namespace else []
     out["fake_robots"] = [sys.executable, "-m", "lvws_ros.robot.fake", str(cell), "--rate", str(float(rate)),
                           *(["--namespace", namespace] if namespace else [])]
     out["dispatcher"] = [sys.executable, "-m", "lvws_ros.ros.dispatcher_node", str(cell), "--ros-args", *ns,
                          "-p", "exit_when_done:=true", "-p", f"summary:={summary}",
-                         "-p", f"expect_subscribers:={audience}"]
+                         "-p", f"expect_subscribers:={audience}", *protocol]
     return out
 
 

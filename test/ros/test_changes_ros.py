@@ -155,9 +155,10 @@ class StreamOverDds:
         probe.node.create_service(Resync, topics.RESYNC_SERVICE, self.on_resync)
         self.started: set[str] = set()
         self.twice = 0
+        self.sent = world.snapshots()
 
     def on_resync(self, _req: Any, res: Any) -> Any:
-        team, graph = self.world.snapshots()
+        team, graph = self.sent  # as of the last batch (the assignments since go out in the next)
         res.team, res.graph, res.seq = convert.team_to_msg(team), convert.graph_to_msg(graph), self.seq
         return res
 
@@ -167,6 +168,7 @@ class StreamOverDds:
         w.advance()
         self.seq += 1
         self.pub.publish(convert.changes_to_msg(w.changes(self.seq)))
+        self.sent = w.snapshots()
         seen = len(probe.got)
         due = any(r.available for r in w.robots.values()) and any(t.status == 1 for t in w.tasks.values())
         probe.spin(1.0 if due else 0.01, answered(probe.got, seen, w.time) if due else lambda: False)
@@ -221,3 +223,12 @@ def test_a_stream_of_thousands_of_tasks_over_dds_all_done_none_twice_the_node_fl
     assert check_schedule(rep.instance, rep.schedule) == []
     n, bad = verify(bag)  # the decisions replayed offline from the bag's rebuilt states
     assert n > 100 and bad == [], (n, bad[:3])
+
+
+@pytest.mark.parametrize("cmd", [["lvws_ros.cli", "launch", "--retire-after", "0"],
+                                 ["lvws_ros.ros.cell_sim_node", "--ros-args", "-p", "retire_after:=0.0"],
+                                 ["lvws_ros.ros.cell_sim_node", "--ros-args", "-p", "protocol:=deltas"]])
+def test_retirement_without_changes_and_an_unknown_protocol_are_refused_with_exit_2(cmd):
+    out = subprocess.run([sys.executable, "-m", *cmd], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert "protocol" in out.stderr

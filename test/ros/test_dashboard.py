@@ -172,7 +172,7 @@ def test_the_page_beside_a_live_run_gains_bars_and_cancels_a_task(tmp_path):
     port = _free_port()
     cmd = [sys.executable, "-m", "lvws_ros.cli", "launch", "--policy", "grp", "--rate", "4", "--no-gif",
            "--bag-dir", str(tmp_path / "bags"), "--out-dir", str(tmp_path / "out"), "--name", "dash",
-           "--dashboard", str(port)]
+           "--dashboard", str(port), "--protocol", "changes"]  # the page follows the world's changes
     log = tmp_path / "launch.txt"
     with open(log, "w") as out:
         run = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, text=True)

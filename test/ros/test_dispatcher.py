@@ -386,16 +386,18 @@ def test_bad_cell_file_exits_2_naming_the_unknown_trait(tmp_path):
 
 
 
-def test_lvws_launch_with_action_robots_runs_the_cell_and_its_bag_holds_the_goal_events(tmp_path):
+def test_lvws_launch_with_action_robots_speaking_changes_runs_the_cell_and_its_bag_holds_the_goal_events(tmp_path):
     from lvws_ros.cli.report import report
     from lvws_ros.ros.launcher import launch
 
     path = tmp_path / "cell.json"
     path.write_text(json.dumps(CELL))
     res = launch(robots="actions", instance=str(path), policy="grp", rate=10.0, bag_dir=tmp_path / "bags",
-                 out_dir=tmp_path / "out", name="actions", gif=False, timeout=120.0, log=lambda _t: None)
+                 out_dir=tmp_path / "out", name="actions", gif=False, timeout=120.0, protocol="changes",
+                 retire_after=0.0, log=lambda _t: None)
     assert res.summary["tasks_done"] == len(CELL["tasks"]) and res.summary["failures"] == 0
     rep = report(res.bag)
     assert rep.complete and not rep.problems
+    assert rep.topics.get("/lvws/changes", 0) > 3 and len(rep.instance.tasks) == len(CELL["tasks"])
     assert rep.voluntary is not None  # every decision's inputs are in the bag: the first state waited for it
     assert sum(g["succeeded"] for g in rep.goals.values()) == res.summary["goals"] >= len(CELL["tasks"])

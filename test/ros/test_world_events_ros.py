@@ -72,12 +72,13 @@ def lvws(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "lvws_ros.cli", *args], capture_output=True, text=True, timeout=120)
 
 
-def test_the_services_change_a_running_namespaced_cell(tmp_path: Path):
+def test_the_services_change_a_running_namespaced_cell_that_speaks_changes(tmp_path: Path):
     domain = str(random.SystemRandom().randint(1, 101))
     cell = ["--namespace", "cellS", "--domain-id", domain]
     tasks = tmp_path / "more.yaml"
     tasks.write_text("- {id: t15, type: assembly, object: obj1, cell: cell_3, duration: 3.0, after: [t14]}\n")
     run = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "launch", *cell, "--policy", "grp", "--rate", "4",
+                            "--protocol", "changes", "--retire-after", "0",  # the services speak through the world
                             "--no-gif", "--name", "svc", "--bag-dir", str(tmp_path / "bags"), "--out-dir",
                             str(tmp_path / "out"), "--timeout", "300"], stdout=subprocess.PIPE,
                            stderr=subprocess.STDOUT, text=True)
@@ -111,4 +112,6 @@ def test_the_services_change_a_running_namespaced_cell(tmp_path: Path):
     assert "husky_1 repaired" in kinds and s["tasks_done"] == s["tasks"] == 14 and s["error"] == ""
     rep = report(tmp_path / "bags" / "svc")
     assert rep.complete and check_schedule(rep.instance, rep.schedule) == []
+    assert {a.task for a in rep.schedule.assignments} == {f"t{k:02d}" for k in range(1, 16)} - {"t12"}
+    assert rep.topics.get("/cellS/lvws/changes", 0) > 10
     assert lvws("cancel", "t01", "--namespace", "cellS", "--domain-id", domain, "--timeout", "2").returncode == 2
