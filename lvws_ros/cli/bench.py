@@ -9,7 +9,9 @@
 * scale (:mod:`lvws_ros.cli.bench_scale`): whole schedules at 100 x 500 and 1000 x 5000 on
   our generator and a subteam-heavy family, node decision latency, the expert on large teams;
 * anytime (:mod:`lvws_ros.cli.bench_anytime`): the planner's plan and its gap to the bound
-  against planning time at 100 x 500 and 1000 x 5000, beside GRP and LVWS (PNG).
+  against planning time at 100 x 500 and 1000 x 5000, beside GRP and LVWS (PNG);
+* stream (:mod:`lvws_ros.cli.bench_stream`): a cell that never stops, 1000 robots, until
+  100,000 tasks are done: decision p50/p99, memory and live tasks per 10,000 (PNG).
 """
 
 from __future__ import annotations
@@ -333,8 +335,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-limit", type=float, default=60.0)
     parser.add_argument("--model", default=None, help="LVWS checkpoint for Fig. 5 (default: the shipped one)")
     parser.add_argument("--fig5-png", default="docs/fig5.png")
-    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale", "anytime", "mspsp",
-                                           "coalitions"], default=None)
+    parser.add_argument("--only", choices=["core", "fig5", "runtime", "dynamic", "scale", "anytime", "stream",
+                                           "mspsp", "coalitions"], default=None)
+    parser.add_argument("--stream-png", default="docs/scale_stream.png")
+    parser.add_argument("--stream-tasks", type=int, default=100_000, help="tasks done before the stream bench stops")
     parser.add_argument("--anytime-png", default="docs/scale_anytime.png")
     parser.add_argument("--anytime-limit", type=float, default=60.0, help="seconds of planning per instance")
     parser.add_argument("--mspsp-dir", default=None,
@@ -364,6 +368,10 @@ def main(argv: list[str] | None = None) -> int:
         from lvws_ros.cli.bench_anytime import main as bench_anytime
 
         bench_anytime(args.seed, args.anytime_limit, args.anytime_png)
+    if args.only in (None, "stream"):
+        from lvws_ros.cli.bench_stream import main as bench_stream
+
+        bench_stream(args.seed, args.stream_png, args.stream_tasks)
     if args.only in (None, "runtime"):
         bench_runtime()
     if args.only in (None, "dynamic"):

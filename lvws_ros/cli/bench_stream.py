@@ -5,7 +5,8 @@
 one change batch per tick (the change-only protocol); the node's work is what the scheduler
 node does with it, in this process, without DDS: the batch's message read
 (``convert.changes_from_msg``), taken by a ``ChangeFollower``, offered to the
-``OnlineScheduler``, decided. Printed per 10,000 tasks done: state-to-decision p50/p99, the
+``OnlineScheduler``, decided, its notices dropped and the garbage collector paced after
+each decision (``collect_after_decision``), as the node does. Printed per 10,000 tasks done: state-to-decision p50/p99, the
 process's resident memory, the live tasks, tasks per wall second; and at the end every task
 accounted for. A PNG of the same.
 """
@@ -25,6 +26,7 @@ from lvws_ros.core.online import OnlineScheduler
 from lvws_ros.errors import AssignmentRejected
 from lvws_ros.registry import make_policy
 from lvws_ros.ros import convert
+from lvws_ros.ros.scheduler_node import collect_after_decision
 from lvws_ros.sim.stream import StreamWorld
 
 BUCKET = 10_000  # tasks done per row
@@ -85,10 +87,13 @@ def run_stream(robots: int = 1000, target: int = 100_000, jobs_per_unit: float =
         core.offer_team(team)
         core.offer_graph(graph)
         decision = core.decide(started=t0)
+        core.changes.clear()  # what the node reports on /diagnostics, then drops
+        core.notices.clear()
         if decision is None:
             continue
         lat.append(time.perf_counter() - t0)
         out.decisions += 1
+        collect_after_decision(out.decisions)  # the node's pacing of the garbage collector
         for task, team_ids in decision.assignments:
             out.assigned_twice += task in started
             started.add(task)

@@ -86,11 +86,11 @@ class _Ids:
     """The task ids a batch's prerequisites may name: the cell's, the batch's own and the
     retired ones (left out when applied), but not those it cancels."""
 
-    def __init__(self, cell: dict[str, TaskInfo], added: set[str], gone: set[str]) -> None:
-        self.cell, self.added, self.gone = cell, added, gone
+    def __init__(self, cell: dict[str, TaskInfo], added: set[str], retired: set[str], gone: set[str]) -> None:
+        self.cell, self.added, self.retired, self.gone = cell, added, retired, gone  # looked up, never copied
 
     def __contains__(self, tid: object) -> bool:
-        return (tid in self.cell or tid in self.added) and tid not in self.gone
+        return (tid in self.cell or tid in self.added or tid in self.retired) and tid not in self.gone
 
 
 class LiveCell:
@@ -174,7 +174,7 @@ class LiveCell:
         snapshot checks, on the batch's items only (a cycle is looked for among the tasks it
         adds, in the whole graph only when it changes a known task's prerequisites)."""
         team, graph = self.team_base, self.graph_base
-        ids = _Ids(self.tasks, {t.id for t in ch.tasks} | set(ch.retired) | self.retired, set(ch.cancelled))
+        ids = _Ids(self.tasks, {t.id for t in ch.tasks} | set(ch.retired), self.retired, set(ch.cancelled))
         known = {s[0] for s in graph.sites}
         try:
             for n, t in enumerate(ch.tasks):
