@@ -100,9 +100,10 @@ def dds_latency(family: str, n: int, m: int, seed: int, pace: float, protocol: s
     from lvws_ros.ros import convert
 
     os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(150, 200))
+    log = open(os.environ.get("LVWS_DDS_NODE_LOG", os.devnull), "w")
     node = subprocess.Popen([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args",
-                             "-p", f"policy:={policy}", "-p", f"seed:={seed}", "-p", "ack_timeout:=1000000.0"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                             "-p", f"policy:={policy}", "-p", f"seed:={seed}", "-p", "ack_timeout:=3600.0"],
+                            stdout=log, stderr=subprocess.STDOUT)
     inst = make_instance(family, n, m, seed)
     w = _world(protocol, inst)
     out = DdsRun()
@@ -132,6 +133,9 @@ def dds_latency(family: str, n: int, m: int, seed: int, pace: float, protocol: s
                 _spin(w, ANSWER_WAIT, answered)
                 hit = [(t, mm) for t, mm in w["got"][k:] if abs(convert.from_time(mm.team_stamp) - stamp) < 1e-9]
                 if not hit:
+                    if node.poll() is not None:
+                        raise RuntimeError(f"the scheduler node exited ({node.returncode}); "
+                                           "LVWS_DDS_NODE_LOG=FILE keeps its output")
                     out.missing += 1
                 else:
                     t, mm = hit[0]
@@ -161,6 +165,7 @@ def dds_latency(family: str, n: int, m: int, seed: int, pace: float, protocol: s
     finally:
         node.terminate()
         node.wait(timeout=30)
+        log.close()
         w["node"].destroy_node()
         import rclpy
 

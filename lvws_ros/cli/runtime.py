@@ -140,6 +140,10 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from lvws_ros.cli.report import report
     from lvws_ros.ros.launcher import launch
 
+    if args.instance and args.robots != "actions":
+        print("lvws launch: --instance runs with --robots actions (the dispatcher and fake robots); the simulator "
+              "runs an assembly-cell configuration (--config)", file=sys.stderr)
+        return 2
     if args.retire_after >= 0 and args.protocol != "changes":
         print("lvws launch: --retire-after needs --protocol changes (a snapshot world sends every task)",
               file=sys.stderr)
@@ -160,8 +164,12 @@ def cmd_launch(args: argparse.Namespace) -> int:
     print("reading the bag back and drawing the Gantt chart ...", flush=True)
     print(report(res.bag, gantt).text())
     print()
-    clock = "sim time" if args.robots == "sim" else "wall time"
-    print(f"makespan:  {s.get('makespan')} s ({clock}), {s.get('tasks_done')}/{s.get('tasks')} tasks")
+    if args.robots == "sim":
+        print(f"makespan:  {s.get('makespan')} s (sim time), {s.get('tasks_done')}/{s.get('tasks')} tasks")
+    else:  # the fake robots work --rate times faster than the cell's time
+        wall = float(s.get("makespan") or 0.0)
+        print(f"makespan:  {wall * args.rate:.2f} (the cell's time: {wall:.2f} s of wall time at --rate "
+              f"{args.rate:g}), {s.get('tasks_done')}/{s.get('tasks')} tasks")
     print(f"decisions: {s.get('decisions_received')}" if args.robots == "sim" else
           f"goals:     {s.get('goals')} sent, {s.get('failures')} failed")
     print(f"wall time: {s.get('wall_seconds_total', 0):.1f} s")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +86,11 @@ def test_a_late_node_that_misses_changes_and_gets_a_bad_one_resyncs_and_finishes
                 world.publish()
                 world.send(changes.CellChanges(world.seq + 1, stamp, cancelled=("no_such_task",)))  # refused
                 world.send(changes.CellChanges(world.seq + 1, stamp))
+            elif step == 9:  # a malformed robot (one capability for a cell of three): refused whole
+                world.publish()
+                robot = replace(world.sent[0].robots[0], capabilities=(1,))
+                world.send(changes.CellChanges(world.seq + 1, stamp, robots=(robot,)))
+                world.send(changes.CellChanges(world.seq + 1, stamp))
             else:
                 world.publish()
             seen = len(probe.got)
@@ -109,7 +115,8 @@ def test_a_late_node_that_misses_changes_and_gets_a_bad_one_resyncs_and_finishes
     warned = [d for d in probe.diags if d.startswith("1:")]  # WARN
     assert any("missed" in d for d in warned), warned
     assert any("unknown task 'no_such_task'" in d for d in warned), warned
-    assert world.resyncs >= 3  # late start, the gap, the refused batch
+    assert any("robots[0]" in d and "capabilities" in d for d in warned), warned
+    assert world.resyncs >= 4  # late start, the gap, the two refused batches
     assert max(int(v.get("changes_seq", 0)) for v in probe.values) == world.seq
     assert all(convert.from_time(m.state_latency) > 0 for m in probe.got)
 

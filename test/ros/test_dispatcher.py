@@ -401,3 +401,12 @@ def test_lvws_launch_with_action_robots_speaking_changes_runs_the_cell_and_its_b
     assert rep.topics.get("/lvws/changes", 0) > 3 and len(rep.instance.tasks) == len(CELL["tasks"])
     assert rep.voluntary is not None  # every decision's inputs are in the bag: the first state waited for it
     assert sum(g["succeeded"] for g in rep.goals.values()) == res.summary["goals"] >= len(CELL["tasks"])
+
+
+def test_lvws_launch_refuses_an_instance_without_action_robots_rather_than_run_the_case_study(tmp_path):
+    path = tmp_path / "cell.json"
+    path.write_text(json.dumps(CELL))
+    out = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "launch", "--instance", str(path), "--bag-dir",
+                          str(tmp_path / "bags")], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "--robots actions" in out.stderr and "Traceback" not in out.stderr
+    assert not (tmp_path / "bags").exists()  # nothing ran
