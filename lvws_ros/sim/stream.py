@@ -60,8 +60,10 @@ class StreamWorld:
         self.done_live: set[str] = set()  # DONE, not retired yet
         self.next_job = 0
         self.next_arrival = float(self.rng.exponential(1.0 / jobs_per_unit))
-        self.dirty_tasks: set[str] = set()
-        self.dirty_robots: set[str] = set()
+        # changed since the last batch, in the order they changed: a new task goes out in the
+        # order the world holds it, so a follower's cell lists tasks as a resync's snapshot does
+        self.dirty_tasks: dict[str, None] = {}
+        self.dirty_robots: dict[str, None] = {}
         self.gone: list[str] = []  # retired since the last batch
         self._arrive()
 
@@ -85,7 +87,7 @@ class StreamWorld:
             self.tasks[tid] = t
             for p in after:
                 self.dependents.setdefault(p, []).append(tid)
-            self.dirty_tasks.add(tid)
+            self.dirty_tasks[tid] = None
             self.counts.added += 1
 
     # -- the robots' work ----------------------------------------------------------------
@@ -101,8 +103,8 @@ class StreamWorld:
         for r in robots:
             self.until[r] = end
             self.robots[r] = replace(self.robots[r], available=False, current_task=task)
-            self.dirty_robots.add(r)
-        self.dirty_tasks.add(task)
+            self.dirty_robots[r] = None
+        self.dirty_tasks[task] = None
 
     def advance(self) -> None:
         """One tick: tasks that end in it are DONE (their robots free, their dependents
@@ -114,17 +116,17 @@ class StreamWorld:
             self.tasks[tid] = replace(t, status=_D, end=end)
             self.done_live.add(tid)
             self.counts.done += 1
-            self.dirty_tasks.add(tid)
+            self.dirty_tasks[tid] = None
             for r in t.assigned_robots:
                 del self.until[r]
                 self.robots[r] = replace(self.robots[r], available=True, current_task="")
-                self.dirty_robots.add(r)
+                self.dirty_robots[r] = None
             for d in self.dependents.get(tid, ()):
                 dep = self.tasks[d]
                 if dep.status == _Q and all(self.tasks[p].status == _D for p in dep.prerequisites
                                             if p in self.tasks):
                     self.tasks[d] = replace(dep, status=_R)
-                    self.dirty_tasks.add(d)
+                    self.dirty_tasks[d] = None
         self._arrive()
         self._retire()
 
@@ -163,9 +165,9 @@ class StreamWorld:
 
     def changes(self, seq: int) -> CellChanges:
         """What changed since the last batch, as batch ``seq``."""
-        tasks = tuple(self.tasks[t] for t in sorted(self.dirty_tasks) if t in self.tasks)
+        tasks = tuple(self.tasks[t] for t in self.dirty_tasks if t in self.tasks)
         robots = tuple(replace(self.robots[r], busy_for=self.until[r] - self.time) if r in self.until
-                       else self.robots[r] for r in sorted(self.dirty_robots))
+                       else self.robots[r] for r in self.dirty_robots)
         batch = CellChanges(seq, self.time, tasks, retired=tuple(self.gone), robots=robots)
-        self.dirty_tasks, self.dirty_robots, self.gone = set(), set(), []
+        self.dirty_tasks, self.dirty_robots, self.gone = {}, {}, []
         return batch
