@@ -136,9 +136,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
                         args.noise_seed)
         print(f"{policy.name}: with duration noise {args.noise:g} (noise seed {args.noise_seed}): planned "
               f"{run.planned.makespan:g}, executed {run.executed.makespan:g} online in "
-              f"{run.decisions} decisions"
-              + (" (online, subteams are sent off together: the file's \"departure\": \"each\" is planned "
-                 "offline only)" if inst.departure != "together" else ""), file=sys.stderr)
+              f"{run.decisions} decisions" + (" (each member sets out on its own)" if inst.departure == "each" else ""),
+              file=sys.stderr)
         result.schedule.extra.update({"noise": args.noise, "noise_seed": args.noise_seed,
                                       "executed_makespan": run.executed.makespan})
     if args.out:  # --out is where the schedule goes: stdout then carries none

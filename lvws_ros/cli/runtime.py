@@ -140,9 +140,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from lvws_ros.cli.report import report
     from lvws_ros.ros.launcher import launch
 
-    if args.instance and args.robots != "actions":
-        print("lvws launch: --instance runs with --robots actions (the dispatcher and fake robots); the simulator "
-              "runs an assembly-cell configuration (--config)", file=sys.stderr)
+    if args.instance and args.robots != "actions" and (args.config or args.events):
+        print(f"lvws launch: --instance runs the simulator on the instance file alone; "
+              f"{'--config' if args.config else '--events'} is for an assembly-cell configuration", file=sys.stderr)
         return 2
     if args.retire_after >= 0 and args.protocol != "changes":
         print("lvws launch: --retire-after needs --protocol changes (a snapshot world sends every task)",
@@ -292,7 +292,9 @@ def _add_launch(add: Adder) -> None:
                    help="sim: the simulator is the world; actions: the dispatcher and fake robots (one ExecuteTask "
                         "server each, --rate times faster than wall time), the bag holding the goal events")
     p.add_argument("--instance", default=None,
-                   help="with --robots actions: the cell (lvws-instance/1; default: the --config cell written as one)")
+                   help="the cell (lvws-instance/1): the simulator runs it (its robots, sites, travel, traits, the way "
+                        "home; each member sets out on its own with \"departure\": \"each\"), or with --robots "
+                        "actions the dispatcher and fake robots (default: the --config cell written as one)")
     p.add_argument("--protocol", choices=("snapshots", "changes"), default="snapshots",
                    help="how the simulator sends the cell's state: its whole team and task graph at every step, or "
                         "numbered changes after the first snapshots (docs/ros.md)")

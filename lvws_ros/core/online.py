@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from lvws_ros.core.executor import Budgeted, Decision, Policy, State, TaskStatus, check_decision
-from lvws_ros.core.problem import MAX_VALUE, OBJECTIVES, Instance, Robot, Task
+from lvws_ros.core.problem import DEPARTURES, MAX_VALUE, OBJECTIVES, Instance, Robot, Task
 from lvws_ros.core.subteams import covered, covers
 from lvws_ros.core.travel import Travel, build_travel
 from lvws_ros.errors import InstanceError
@@ -111,6 +111,9 @@ class GraphSnapshot:
     trait_names: tuple[str, ...] = ()  # traits, roles and the objective (formats.md, "Traits")
     roles: bool = False
     objective: str = ""  # "" or "makespan"; "return"
+    # "" or "together": a subteam sets out together once its members are free; "each": a task
+    # may be given to busy robots, each of whom sets out for it once free (formats.md, "departure")
+    departure: str = ""
 
 
 @dataclass(frozen=True)
@@ -207,6 +210,8 @@ def check_graph(snap: GraphSnapshot, checked: GraphSnapshot | None = None) -> No
         check_task(snap, n, snap.tasks[n], ids)
     if snap.objective not in ("", *OBJECTIVES):
         raise InstanceError(f"TaskGraph objective: '', 'makespan' or 'return', got {snap.objective[:40]!r}")
+    if snap.departure not in ("", *DEPARTURES):
+        raise InstanceError(f"TaskGraph departure: '', 'together' or 'each', got {snap.departure[:40]!r}")
     _check_sites(snap, changed)
     if not structure_same:
         check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
@@ -318,7 +323,8 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
     if homes and travel is None:
         raise InstanceError(f"TeamState robots ({homes[0]!r}).home: a home needs the TaskGraph's sites")
     return Instance(name, tuple(graph.capability_names), robots, tasks, travel=travel, traits=traits,
-                    objective=graph.objective or "makespan", roles=bool(graph.roles))
+                    objective=graph.objective or "makespan", roles=bool(graph.roles),
+                    departure=graph.departure or "together")
 
 
 def off_site(robot: RobotInfo) -> str:
@@ -440,7 +446,22 @@ def unready(graph: GraphSnapshot) -> list[tuple[str, str]]:
 def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
                 pending: Mapping[str, Sequence[str]] = {}) -> State:
     """The executor state at the newer snapshot's time, with ``pending`` (task -> robots
-    assigned but not yet acknowledged) counted as running (the rules of the module doc)."""
+    assigned but not yet acknowledged) counted as running (the rules of the module doc).
+    With ``"departure": "each"`` a task the world took starts when it says (its members
+    report themselves busy until their last task ends, at its site), and a pending one is
+    given as the executor gives it, in the order it was sent (:meth:`State.start`)."""
+    if inst.departure == "each":
+        state = _build_state(inst, team, graph, {}, ahead=True)
+        for tid, robots in pending.items():
+            j = inst.task_index.get(tid)
+            if j is not None and state.task_status[j] == TaskStatus.READY and all(r in inst.robot_index for r in robots):
+                state.start(j, [inst.robot_index[r] for r in robots])
+        return state
+    return _build_state(inst, team, graph, pending)
+
+
+def _build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot, pending: Mapping[str, Sequence[str]],
+                 ahead: bool = False) -> State:
     now = max(team.stamp, graph.stamp)
     m, n = inst.num_tasks, inst.num_robots
     tasks = graph.tasks
@@ -470,7 +491,11 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
     site = None if own is None else own.copy()  # and where it will be when its task is done
     for j in np.flatnonzero(status >= _ASSIGNED).tolist():
         t = graph.tasks[j]
-        if status[j] == _ASSIGNED:
+        if status[j] == _ASSIGNED and ahead and t.start is not None:  # the world says when it starts
+            start[j] = t.start
+            idx = list(teams[j])
+            free_at[idx] = np.maximum(free_at[idx], t.start + inst.durations[j])
+        elif status[j] == _ASSIGNED:
             idx = list(teams[j])
             busy_until = [free_at[i] for i in idx if free_at[i] > now]
             # just assigned, or unacknowledged: the subteam travels first (travel extension)
@@ -478,7 +503,7 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
             end = max(busy_until) if busy_until else now + go + inst.durations[j]
             free_at[idx] = np.maximum(free_at[idx], end)
             start[j] = end - inst.durations[j]
-            if tr is not None and site is not None:
+            if tr is not None and site is not None and not ahead:  # ahead: each robot says where it ends
                 site[idx] = tr.task_to[j]
         else:  # done
             start[j] = t.start if t.start is not None else now - inst.durations[j]
@@ -512,7 +537,7 @@ def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:
     (a new one when tasks or robots come or go, or change)."""
     known = {s[0] for s in graph.sites}
     return (team.capability_names, tuple(_robot_part(r) for r in team.robots), tuple(_task_part(t) for t in graph.tasks),
-            (graph.trait_names, graph.roles, graph.objective),
+            (graph.trait_names, graph.roles, graph.objective, graph.departure),
             # travel: the sites, speeds and task sites; where a robot is only when it is off
             # every site (a new site at its pose); the state follows the robots (build_state)
             graph.sites, graph.distances, tuple((t.site_from, t.site_to) for t in graph.tasks),
@@ -540,8 +565,9 @@ def same_cell(before: tuple[TeamSnapshot, GraphSnapshot], now: tuple[TeamSnapsho
     (t0, g0), (t1, g1) = before, now
     if g0.sites or g1.sites or len(t0.robots) != len(t1.robots) or len(g0.tasks) != len(g1.tasks):
         return False
-    if (t0.capability_names, t0.trait_names, g0.capability_names, g0.trait_names, g0.roles, g0.objective) != \
-            (t1.capability_names, t1.trait_names, g1.capability_names, g1.trait_names, g1.roles, g1.objective):
+    if (t0.capability_names, t0.trait_names, g0.capability_names, g0.trait_names, g0.roles, g0.objective,
+            g0.departure) != (t1.capability_names, t1.trait_names, g1.capability_names, g1.trait_names, g1.roles,
+                              g1.objective, g1.departure):
         return False
     return all(a is b or (_robot_part(a), a.speed) == (_robot_part(b), b.speed)
                for a, b in zip(t0.robots, t1.robots, strict=True)) and \
@@ -712,7 +738,8 @@ class OnlineScheduler:
         ready = frozenset(inst.tasks[j].id for j in state.ready_tasks())
         due = bool(free - self._seen_free) or bool(ready - self._seen_ready)
         due |= not (state.task_status == TaskStatus.ASSIGNED).any()  # nothing runs: waiting would stall
-        if not (due and free and ready):
+        ahead = inst.departure == "each"  # busy robots may be given tasks: a new ready task is due
+        if not (due and (free or ahead) and ready):
             self._seen_free, self._seen_ready = free, ready
             return None
         decision = self.decide_state(state, started)  # if it raises, the same state is due again

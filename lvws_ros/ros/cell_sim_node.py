@@ -38,6 +38,7 @@ from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import Marker, MarkerArray
 
 from lvws_ros.core.executor import TaskStatus
+from lvws_ros.core.formats import load_instance
 from lvws_ros.errors import AssignmentRejected, ConfigError, LvwsError, WorldEventRejected
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main, spin_once
@@ -45,6 +46,7 @@ from lvws_ros.ros.resources import case_study_config
 from lvws_ros.ros.state_publisher import StatePublisher
 from lvws_ros.sim.config import ARM_KINDS, load_cell_config
 from lvws_ros.sim.events import WorldEvent, apply_event, load_events, stuck_reason
+from lvws_ros.sim.instance_sim import InstanceSim
 from lvws_ros.sim.world import CellSim, Event
 
 DESCRIPTION = (
@@ -56,14 +58,30 @@ DESCRIPTION = (
     "events (scripted world events, YAML), stuck_grace (wall s a run waits for a repair after a service made a "
     "task impossible, default 10), protocol (snapshots: the whole state at every step; changes: numbered "
     "CellChanges after the first snapshots, which the resync service gives again), retire_after (changes only: "
-    "sim s after which done work retires once its dependents have started, default -1: never)."
+    "sim s after which done work retires once its dependents have started, default -1: never), instance (an "
+    "lvws-instance/1 file run instead of the config: its robots, sites, travel, traits and the way home; each "
+    "member sets out on its own with departure each)."
 )
 PROGRESS_SECONDS = 2.0  # wall seconds between progress lines (lvws launch shows them)
 ROBOT_COLORS = {"panda": (1.0, 0.5, 0.0), "jackal": (0.1, 0.4, 0.9), "husky": (0.1, 0.7, 0.2)}
 
 
-def markers(sim: CellSim, frame_id: str) -> MarkerArray:
-    """Cells, robots (opaque while busy), objects and labels for RViz / Foxglove."""
+def instance_sim(path: str, config: str, events: str, noise: float, noise_seed: int) -> InstanceSim:
+    """The world of an instance file (ConfigError for a config or scripted events beside it)."""
+    if config or events:
+        raise ConfigError(f"instance {path}: runs alone; {'config' if config else 'events'} is for an "
+                          "assembly-cell config")
+    return InstanceSim(load_instance(path), noise=noise, noise_seed=noise_seed)
+
+
+def _sites(sim: InstanceSim) -> tuple[tuple[str, ...], tuple[tuple[float, float], ...]]:
+    tr = sim.inst.travel
+    return ((), ()) if tr is None else (tuple(tr.sites), tuple(tr.coordinates))
+
+
+def markers(sim: CellSim | InstanceSim, frame_id: str) -> MarkerArray:
+    """Cells, robots (opaque while busy), objects and labels for RViz / Foxglove (an
+    instance file: its sites and robots)."""
     stamp = convert.to_time(sim.time)
     out = MarkerArray()
 
@@ -78,6 +96,15 @@ def markers(sim: CellSim, frame_id: str) -> MarkerArray:
         out.markers.append(m)
 
     white = (1.0, 1.0, 1.0, 1.0)
+    if isinstance(sim, InstanceSim):
+        for name, (x, y) in zip(*_sites(sim), strict=True):
+            add("cells", Marker.CUBE, x, y, (0.8, 0.8, 0.02), (0.7, 0.7, 0.7, 0.5))
+            add("labels", Marker.TEXT_VIEW_FACING, x, y + 0.6, (0.4, 0.4, 0.4), white, name)
+        for rid, task in sim.robot_task.items():
+            x, y = sim.position(rid)
+            add("robots", Marker.SPHERE, x, y, (0.5, 0.5, 0.5), (0.1, 0.4, 0.9, 1.0 if task else 0.5))
+            add("labels", Marker.TEXT_VIEW_FACING, x, y - 0.6, (0.3, 0.3, 0.3), white, f"{rid}: {task or 'wait'}")
+        return out
     for cell in sim.cfg.cells.values():
         add("cells", Marker.CUBE, *cell.position, (*cell.size, 0.02), (0.7, 0.7, 0.7, 0.5))
         add("labels", Marker.TEXT_VIEW_FACING, cell.position[0], cell.position[1] + cell.size[1] / 2 + 0.3,
@@ -120,7 +147,15 @@ class CellSimNode(Node):
             raise LvwsError(f"parameter rate must be > 0, got {self.rate}")
         noise = float(self.declare_parameter("noise", 0.0).value)
         noise_seed = int(self.declare_parameter("noise_seed", 0).value)
-        self.sim = CellSim(load_cell_config(cfg_path or case_study_config()), noise=noise, noise_seed=noise_seed)
+        instance = str(self.declare_parameter("instance", "").value)
+        self.sim: CellSim | InstanceSim = (
+            instance_sim(instance, cfg_path, events_path, noise, noise_seed) if instance else
+            CellSim(load_cell_config(cfg_path or case_study_config()), noise=noise, noise_seed=noise_seed))
+        if self.gif_path and isinstance(self.sim, InstanceSim):
+            self.get_logger().warning(f"gif {self.gif_path}: drawn for an assembly-cell config only; none for an "
+                                      "instance file")
+            self.gif_path = ""
+        self.seen_ready: frozenset[str] = frozenset()
         self.frame = self.sim.cfg.frame_id
         # "snapshots": the whole team and task graph at every state; "changes": those once, then
         # numbered CellChanges, with the snapshots on request (the resync service; docs/ros.md)
@@ -261,8 +296,12 @@ class CellSimNode(Node):
 
     # -- the loop ------------------------------------------------------------------------
     def decision_due(self) -> bool:
-        return (any(r.available for r in self.sim.team_snapshot().robots)
-                and any(t.status == TaskStatus.READY for t in self.sim.graph_snapshot().tasks))
+        """A robot free and a task ready; with departure each also a task newly ready (the
+        node may give it to busy robots)."""
+        ready = frozenset(t.id for t in self.sim.graph_snapshot().tasks if t.status == TaskStatus.READY)
+        fresh, self.seen_ready = bool(ready - self.seen_ready), ready
+        ahead = isinstance(self.sim, InstanceSim) and self.sim.inst.departure == "each"
+        return bool(ready) and (any(r.available for r in self.sim.team_snapshot().robots) or (ahead and fresh))
 
     def start(self) -> None:
         """Once the scheduler and recorder subscribe (or the wait is over): the first state."""
@@ -336,7 +375,7 @@ class CellSimNode(Node):
             "error": error, "sim_time": self.sim.time, "wall_seconds": time.monotonic() - self.start_wall,
             "world_events": self.world_events, "failed_robots": sorted(self.sim.failed),
         }
-        if self.gif_path and self.sim.trace:
+        if self.gif_path and isinstance(self.sim, CellSim) and self.sim.trace:
             from lvws_ros.sim.render import render_gif
 
             self.sim.record_frame()

@@ -120,7 +120,7 @@ def graph_to_msg(snap: GraphSnapshot, frame_id: str = "map") -> TaskGraph:
     msg.tasks = [_task_msg(t) for t in snap.tasks]
     msg.sites = [Site(id=name, x=float(x), y=float(y)) for name, x, y in snap.sites]
     msg.site_distances = [float(d) for d in snap.distances]
-    msg.roles, msg.objective = bool(snap.roles), snap.objective
+    msg.roles, msg.objective, msg.departure = bool(snap.roles), snap.objective, snap.departure
     return msg
 
 
@@ -169,7 +169,7 @@ def _graph(msg: Any, tasks: tuple[TaskInfo, ...]) -> GraphSnapshot:
     return GraphSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names), tasks, sites,
                          tuple(float(d) for d in getattr(msg, "site_distances", ())),
                          tuple(getattr(msg, "trait_names", ())), bool(getattr(msg, "roles", False)),
-                         str(getattr(msg, "objective", "")))
+                         str(getattr(msg, "objective", "")), str(getattr(msg, "departure", "")))
 
 
 def _task_info(t: Any, newer: bool) -> TaskInfo:

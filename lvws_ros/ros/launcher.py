@@ -109,7 +109,7 @@ def _tail(path: Path, lines: int = 15) -> str:
 def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: str, rate: float, config: str,
               file_params: dict[str, Any], summary: Path, gif: Path | None, sync: bool,
               namespace: str = "", events: str | None = None, dashboard: int | None = None,
-              protocol: str = "snapshots", retire_after: float = -1.0) -> dict[str, list[str]]:
+              protocol: str = "snapshots", retire_after: float = -1.0, instance: str = "") -> dict[str, list[str]]:
     """The children's command lines, recorder first, simulator last (the dashboard, when
     asked for, before the simulator)."""
     from lvws_ros.ros.scheduler_node import DEFAULT_POLICY
@@ -130,6 +130,8 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
         sim_params += ["-p", f"gif:={gif}"]
     if config:
         sim_params += ["-p", f"config:={config}"]
+    if instance:  # the simulator runs an instance file instead of an assembly-cell config
+        sim_params += ["-p", f"instance:={Path(instance).resolve()}"]
     if events:
         sim_params += ["-p", f"events:={Path(events).resolve()}"]
     ns = ["-r", f"__ns:={namespace}", *CLOCK_REMAP] if namespace else []
@@ -322,13 +324,17 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     if dashboard is not None:
         check_port("127.0.0.1", dashboard)  # before anything starts
     in_file = _check_inputs(policy, model_path, config, params_file, events, namespace)
+    if instance:
+        from lvws_ros.core.formats import load_instance
+
+        load_instance(instance)  # checked before anything starts
     run, bag, out = _run_dirs(name, namespace, policy or str(in_file.get("policy", DEFAULT_POLICY)), bag_dir, out_dir)
     summary_path = out / "summary.json"
     gif_path = out / "run.gif"
     commands = _commands(bag, policy=policy, seed=seed, model_path=model_path, rate=rate, config=config,
                          file_params=in_file, summary=summary_path, gif=gif_path if gif else None, sync=sync,
                          namespace=namespace, events=events, dashboard=dashboard, protocol=protocol,
-                         retire_after=retire_after)
+                         retire_after=retire_after, instance=instance if robots != "actions" else "")
     if robots == "actions":
         commands = _actions_commands(commands, actions_cell(out, config, instance), rate, summary_path, namespace,
                                      3 if dashboard is not None else 2)

@@ -20,11 +20,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from lvws_ros.errors import ConfigError
 from lvws_ros.sim.config import read_yaml
 from lvws_ros.sim.world import CellSim, Event
+
+if TYPE_CHECKING:
+    from lvws_ros.sim.instance_sim import InstanceSim
 
 __all__ = ["KINDS", "WorldEvent", "apply_event", "load_events", "may_unblock", "stuck_reason"]
 
@@ -75,7 +78,7 @@ def load_events(path: str | Path) -> list[WorldEvent]:
     return sorted(events, key=lambda e: e.at)
 
 
-def apply_event(sim: CellSim, event: WorldEvent) -> list[Event]:
+def apply_event(sim: CellSim | InstanceSim, event: WorldEvent) -> list[Event]:
     """Apply one event to the world (WorldEventRejected when the world refuses it)."""
     if event.kind == "submit":
         return sim.submit(event.tasks)
@@ -90,7 +93,7 @@ def may_unblock(events: list[WorldEvent]) -> bool:
     return any(e.kind in ("repair", "cancel") for e in events)
 
 
-def stuck_reason(sim: CellSim, later: list[WorldEvent]) -> str:
+def stuck_reason(sim: CellSim | InstanceSim, later: list[WorldEvent]) -> str:
     """Why the run can never finish ('' while it can): tasks the robots left can never do,
     with no later event that could change that."""
     impossible = sim.impossible()

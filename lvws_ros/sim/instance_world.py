@@ -4,8 +4,9 @@ the scheduler node uses, from snapshots that give the nominal durations, while e
 takes its duration times a seeded factor in [1 - noise, 1 + noise] (:func:`duration_factor`,
 the rule of the cell simulator too). Robots travel as the executor says (travel
 extension); decisions happen when tasks end, as in the executor. With noise 0 the run is
-the executor's, but for a file with ``"departure": "each"``: online, as in the ROS worlds,
-subteams are sent off together (the snapshots carry no departure).
+the executor's, for either departure: with ``"departure": "each"`` (the TaskGraph carries it)
+a task may be given to busy robots, each member sets out for it from where its earlier tasks
+leave it as soon as it is free, and the task starts when the last one is there.
 
 ``lvws solve INSTANCE --noise 0.3 --noise-seed S`` prints the planned makespan (the
 policy in the executor) against the executed one.
@@ -34,7 +35,7 @@ from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
 from lvws_ros.errors import ConfigError, PolicyError
 
-__all__ = ["NoisyRun", "duration_factor", "run_noisy"]
+__all__ = ["InstanceWorld", "NoisyRun", "duration_factor", "run_noisy"]
 
 
 def duration_factor(noise: float, seed: int, task_id: str) -> float:
@@ -61,8 +62,9 @@ class NoisyRun:
     decisions: int
 
 
-class _World:
-    """The state of the noisy world: which task runs with whom from when to when."""
+class InstanceWorld:
+    """The state of the noisy world: which task runs with whom from when to when (``lvws solve
+    --noise``; the cell simulator runs it for an instance file, :mod:`lvws_ros.sim.instance_sim`)."""
 
     def __init__(self, inst: Instance, noise: float, seed: int) -> None:
         self.inst = inst
@@ -71,9 +73,10 @@ class _World:
         self.status = np.full(inst.num_tasks, TaskStatus.QUEUED, dtype=np.int8)
         self.start = np.full(inst.num_tasks, np.nan)
         self.team: list[tuple[int, ...]] = [() for _ in inst.tasks]
-        self.busy: list[int | None] = [None] * inst.num_robots  # the task each robot is on
+        self.queue: list[list[int]] = [[] for _ in inst.robots]  # each robot's tasks given, not done, in order
+        self.free = np.zeros(inst.num_robots)  # when each robot's last task given ends
         tr = inst.travel
-        self.site = list(tr.robot_site) if tr is not None else [0] * inst.num_robots
+        self.site = list(tr.robot_site) if tr is not None else [0] * inst.num_robots  # where it is when free
         self._ready()
 
     def _ready(self) -> None:
@@ -86,20 +89,31 @@ class _World:
     def done(self) -> bool:
         return bool((self.status == TaskStatus.DONE).all())
 
+    def executed_instance(self) -> Instance:
+        """The instance with the durations the world took."""
+        return replace(self.inst, tasks=tuple(replace(t, duration=float(self.actual[j]))
+                                              for j, t in enumerate(self.inst.tasks)))
+
     def assign(self, task: str, robots: tuple[str, ...]) -> None:
         inst, j = self.inst, self.inst.task_index[task]
         team = [inst.robot_index[r] for r in robots]
-        if self.status[j] != TaskStatus.READY or any(self.busy[r] is not None for r in team):
+        ahead = inst.departure == "each"  # a busy member sets out once its earlier tasks end
+        if self.status[j] != TaskStatus.READY or (not ahead and any(self.queue[r] for r in team)):
             raise PolicyError(f"task {task!r} with {list(robots)}: not ready, or a member is busy")
         tr = inst.travel
-        arrive = 0.0 if tr is None else tr.arrival(team, [self.site[r] for r in team], j)
-        if math.isinf(arrive):
+        leave = [max(self.time, float(self.free[r])) for r in team]
+        arrive = [0.0 if tr is None else tr.arrival([r], [self.site[r]], j) for r in team]
+        if math.isinf(max(arrive)):
             raise PolicyError(f"task {task!r}: a fixed member of {list(robots)} is elsewhere")
         self.status[j] = TaskStatus.ASSIGNED
-        self.start[j] = self.time + arrive
+        # together: every member is free now and they set out at once (Travel.arrival's rule)
+        self.start[j] = max(a + b for a, b in zip(leave, arrive, strict=True))
         self.team[j] = tuple(sorted(team))
         for r in team:
-            self.busy[r] = j
+            self.queue[r].append(j)
+            self.free[r] = self.start[j] + self.actual[j]
+            if tr is not None:
+                self.site[r] = tr.task_to[j]
 
     def step(self) -> None:
         """To the next end of a task; its robots are free where it leaves them."""
@@ -108,13 +122,10 @@ class _World:
             raise PolicyError(f"t={self.time:g}: nothing runs and nothing was started: the run cannot go on")
         ends = self.start[running] + self.actual[running]
         self.time = float(ends.min())
-        tr = self.inst.travel
         for j in running[ends <= self.time + 1e-9]:
             self.status[j] = TaskStatus.DONE
             for r in self.team[j]:
-                self.busy[r] = None
-                if tr is not None:
-                    self.site[r] = tr.task_to[j]
+                self.queue[r].remove(j)
         self._ready()
 
     def team_snapshot(self) -> TeamSnapshot:
@@ -122,11 +133,11 @@ class _World:
         k = len(inst.capabilities)
         robots = []
         for i, r in enumerate(inst.robots):
-            j = self.busy[i]
-            busy = 0.0 if j is None else max(0.0, float(self.start[j] + inst.durations[j] - self.time))
-            site = "" if tr is None else tr.sites[tr.task_to[j] if j is not None else self.site[i]]
-            robots.append(RobotInfo(r.id, "robot", j is None, r.capabilities, r.payload,
-                                    "" if j is None else inst.tasks[j].id, busy, (0.0, 0.0, 0.0), site,
+            q = self.queue[i]  # busy until its last task given ends (nominally), at that task's site
+            busy = 0.0 if not q else max(0.0, float(self.start[q[-1]] + inst.durations[q[-1]] - self.time))
+            site = "" if tr is None else tr.sites[self.site[i]]
+            robots.append(RobotInfo(r.id, "robot", not q, r.capabilities, r.payload,
+                                    "" if not q else inst.tasks[q[0]].id, busy, (0.0, 0.0, 0.0), site,
                                     0.0 if tr is None else tr.robot_speed[i],
                                     tuple(float(a) for a in inst.robot_amounts[i, k:]),
                                     "" if tr is None else tr.sites[tr.home(i)]))
@@ -147,7 +158,7 @@ class _World:
                                   roles_code(t.roles)))
         where = ((), ()) if tr is None else graph_sites(tr)
         return GraphSnapshot(self.time, inst.capabilities, tuple(tasks), *where, inst.traits, inst.roles,
-                             inst.objective)
+                             inst.objective, inst.departure)
 
 
 def run_noisy(inst: Instance, make: Callable[[], Policy], noise: float, seed: int) -> NoisyRun:
@@ -155,7 +166,7 @@ def run_noisy(inst: Instance, make: Callable[[], Policy], noise: float, seed: in
     each); the factors seeded by ``seed``."""
     noise = check_noise(noise)
     planned = simulate(inst, make()).schedule
-    world = _World(inst, noise, seed)
+    world = InstanceWorld(inst, noise, seed)
     online = OnlineScheduler(make())
     decisions = 0
     while not world.done:
@@ -169,7 +180,7 @@ def run_noisy(inst: Instance, make: Callable[[], Policy], noise: float, seed: in
             for task, robots in d.assignments:
                 world.assign(task, robots)
         world.step()
-    took = replace(inst, tasks=tuple(replace(t, duration=float(world.actual[j])) for j, t in enumerate(inst.tasks)))
+    took = world.executed_instance()
     out = [Assignment(t.id, tuple(inst.robots[r].id for r in world.team[j]), float(world.start[j]),
                       float(world.start[j] + world.actual[j])) for j, t in enumerate(inst.tasks)]
     executed = Schedule.from_assignments(took, planned.policy, out, decisions)

@@ -403,10 +403,37 @@ def test_lvws_launch_with_action_robots_speaking_changes_runs_the_cell_and_its_b
     assert sum(g["succeeded"] for g in rep.goals.values()) == res.summary["goals"] >= len(CELL["tasks"])
 
 
-def test_lvws_launch_refuses_an_instance_without_action_robots_rather_than_run_the_case_study(tmp_path):
+def test_lvws_launch_refuses_an_instance_beside_a_config_before_anything_runs(tmp_path):
     path = tmp_path / "cell.json"
     path.write_text(json.dumps(CELL))
-    out = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "launch", "--instance", str(path), "--bag-dir",
-                          str(tmp_path / "bags")], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 2 and "--robots actions" in out.stderr and "Traceback" not in out.stderr
-    assert not (tmp_path / "bags").exists()  # nothing ran
+    out = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "launch", "--instance", str(path), "--config",
+                          str(path), "--bag-dir", str(tmp_path / "bags")], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "--config is for an assembly-cell configuration" in out.stderr
+    assert "Traceback" not in out.stderr and not (tmp_path / "bags").exists()  # nothing ran
+
+
+def test_the_simulator_runs_an_instance_departing_each_members_setting_out_on_their_own(tmp_path):
+    """``lvws launch --instance`` without action robots: the simulator runs the file (a
+    coalition benchmark's cell: 20 robots, 50 tasks, travel, the way home, departure each).
+    Over DDS the run completes valid by the file's own rules, and the bag shows members of
+    one subteam setting out for it at different times (each its own current task)."""
+    from lvws_ros.cli.report import report
+    from lvws_ros.ros.bag import read_run
+    from lvws_ros.ros.launcher import launch
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "dcmrta" / "env_0.json"
+    res = launch(instance=str(path), policy="auto", rate=20.0, bag_dir=tmp_path / "bags", out_dir=tmp_path / "out",
+                 name="each", gif=False, timeout=240.0, log=lambda _t: None)
+    assert res.summary["tasks_done"] == res.summary["tasks"] == 50 and not res.summary["rejected"]
+    rep = report(res.bag)
+    assert rep.complete and not rep.problems
+    run = read_run(res.bag)
+    assert run.graphs[-1].departure == "each"  # the TaskGraph carried it, and the recorder kept it
+    heading: dict[tuple[str, str], float] = {}  # (robot, task) -> when the bag first shows it on its way
+    for team in run.teams:
+        for r in team.robots:
+            if r.current_task:
+                heading.setdefault((r.id, r.current_task), team.stamp)
+    apart = [a.task for a in rep.schedule.assignments
+             if len({heading.get((r, a.task)) for r in a.robots} - {None}) > 1]
+    assert apart, "every subteam set out together"

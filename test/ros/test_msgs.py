@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Pose2D
 from lvws_msgs.msg import (
@@ -87,6 +88,19 @@ def test_task_graph_roundtrip():
     back = roundtrip(msg)
     assert back == msg
     assert len(back.tasks) == 5 and back.tasks[4].payload == 7.0
+    assert back.departure == ""  # not set: "together", as every graph before the field
+
+
+def test_the_departure_crosses_cdr_and_converts_back_and_a_bad_one_is_refused():
+    from lvws_ros.core.online import GraphSnapshot, check_graph
+    from lvws_ros.errors import InstanceError
+    from lvws_ros.ros import convert
+
+    snap = GraphSnapshot(3.0, ("a",), (), departure="each")
+    back = convert.graph_from_msg(roundtrip(convert.graph_to_msg(snap)))
+    assert back.departure == "each" and back == snap
+    with pytest.raises(InstanceError, match="TaskGraph departure: '', 'together' or 'each', got 'alone'"):
+        check_graph(GraphSnapshot(3.0, ("a",), (), departure="alone"))
 
 
 def test_assignment_array_roundtrip():

@@ -59,3 +59,27 @@ def test_lvws_solve_prints_planned_and_executed_and_refuses_bad_noise():
     bad = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "solve", str(EXAMPLE), "--noise", "1"],
                          capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "duration noise must be in [0, 1)" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_a_cell_departing_each_runs_online_as_its_plan_members_setting_out_on_their_own():
+    """The TaskGraph carries "departure": "each": the node gives tasks to robots still busy
+    (the plan's order), each sets out once free, and the run is the plan, to the second.
+    Sent off together (as before the field), the same plan takes longer."""
+    from dataclasses import replace
+
+    from lvws_ros.core.executor import simulate
+    from lvws_ros.planning.follow import PlanFollower
+
+    inst = load_instance(Path(__file__).resolve().parents[2] / "examples" / "dcmrta" / "env_0.json")
+    assert inst.departure == "each"
+    plan = simulate(inst, make_policy("auto", seed=0, iterations=1)).schedule
+    run = run_noisy(inst, lambda: PlanFollower(plan), 0.0, 0)
+    assert run.executed.makespan == pytest.approx(plan.makespan, abs=1e-6)
+    assert check_schedule(run.executed_instance, run.executed) == []
+    # some task was given while a member was still at work: fewer decisions than tasks
+    assert run.decisions < inst.num_tasks
+    together = replace(inst, departure="together")
+    apart = run_noisy(together, lambda: PlanFollower(plan), 0.0, 0)
+    assert apart.executed.makespan > plan.makespan + 1.0
+    noisy = run_noisy(inst, lambda: PlanFollower(plan), 0.2, 5)
+    assert check_schedule(noisy.executed_instance, noisy.executed) == []
