@@ -116,8 +116,10 @@ class Outcome:
     cancel: list[int] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     changed: bool = False
+    send: list[GoalSpec] = field(default_factory=list)  # goals due now ("departure": "each": a member now free)
 
     def add(self, other: Outcome) -> Outcome:
+        self.send += other.send
         self.news += other.news
         self.cancel += other.cancel
         self.notes += other.notes
@@ -133,6 +135,7 @@ class _Robot:
     goal: int = 0  # key of its latest goal (0: none)
     failed: str = ""  # why it left the team ("": present)
     failed_at: float = 0.0
+    queue: list[str] = field(default_factory=list)  # "each": tasks given while busy, in order; each goal sent once free
 
 
 @dataclass
@@ -194,17 +197,19 @@ class Dispatch:
             return str(e["site"]), str(e["site"])
         return str(e.get("from", "")), str(e.get("to", ""))
 
-    def _travel_time(self, robot: str, site: str) -> float:
-        """Seconds robot ``robot`` needs from where it is to ``site`` (0 without travel)."""
+    def _travel_time(self, robot: str, site: str, start: str | None = None) -> float:
+        """Seconds robot ``robot`` needs from where it is (or from site ``start``) to
+        ``site`` (0 without travel)."""
         tr, r = self.inst.travel, self.robots[robot]
-        if tr is None or not site or r.site == site:
+        at = r.site if start is None else start
+        if tr is None or not site or at == site:
             return 0.0
         speed = tr.robot_speed[r.index]
         if speed <= 0:
             return 0.0
         b = tr.sites.index(site)
-        if r.site in tr.sites:
-            return float(tr.distance[tr.sites.index(r.site), b]) / speed
+        if at in tr.sites:
+            return float(tr.distance[tr.sites.index(at), b]) / speed
         x, y = tr.coordinates[b]
         return math.hypot(x - r.pose[0], y - r.pose[1]) / speed
 
@@ -238,24 +243,72 @@ class Dispatch:
             r = self.robots[rid]
             if r.failed:
                 raise DispatchRefused(f"{what}: robot {rid!r} is out of the team ({r.failed})")
-            if self.busy_with(rid):
+            if self.engaged(rid) and not self.ahead:
                 raise DispatchRefused(f"{what}: robot {rid!r} is busy with {self.busy_with(rid)}")
-        site, site_to = self._sites(task)
-        spec = self._specs[task]
-        start = now + max(self._travel_time(rid, site) for rid in team)
+        site = self._sites(task)[0]
+        # each member sets out once free ("each": when its tasks given before end), from where they leave it
+        start = max(self._free_at(rid, now) + self._travel_time(rid, site, self._site_when_free(rid))
+                    for rid in team)
         t.status, t.team, t.assigned_at, t.start, t.end = TaskStatus.ASSIGNED, tuple(team), now, None, None
-        t.expected_end, t.goals = start + spec.duration, {}
-        out, goals = Outcome(changed=True), []
+        t.expected_end, t.goals = start + self._specs[task].duration, {}
+        out = Outcome(changed=True)
         for rid in team:
-            key = self._next_key
-            self._next_key += 1
-            self.goals[key] = Goal(key, task, rid, now, heard=now)
-            t.goals[rid] = self.robots[rid].goal = key
-            goals.append(GoalSpec(key, task, rid, tuple(team), site, site_to or site,
-                                  tuple(n for n, _ in spec.requires), tuple(float(a) for _, a in spec.requires),
-                                  start, float(spec.duration)))
-            out.news.append(GoalNews(GoalKind.SENT, task, rid, site=site))
+            if self.engaged(rid):
+                self.robots[rid].queue.append(task)  # its goal goes out once it is free
+            else:
+                out.add(self._send(task, rid, now))
+        goals, out.send = out.send, []
         return goals, out
+
+    @property
+    def ahead(self) -> bool:
+        """``"departure": "each"``: a task may be given to busy robots (formats.md)."""
+        return self.inst.departure == "each"
+
+    def engaged(self, robot: str) -> bool:
+        """Whether the robot serves a task, or has tasks given that wait for it."""
+        return bool(self.busy_with(robot) or self.robots[robot].queue)
+
+    def _last_task(self, robot: str) -> _Task | None:
+        r = self.robots[robot]
+        last = r.queue[-1] if r.queue else self.busy_with(robot)
+        return self.tasks.get(last) if last else None
+
+    def _free_at(self, robot: str, now: float) -> float:
+        """When the robot is expected free: the expected end of its last task given, or now."""
+        t = self._last_task(robot)
+        return max(now, t.expected_end) if t is not None and t.status == TaskStatus.ASSIGNED else now
+
+    def _site_when_free(self, robot: str) -> str:
+        r, t = self.robots[robot], self._last_task(robot)
+        if t is None or self.inst.travel is None:
+            return r.site
+        site, site_to = self._sites(t.entry["id"])
+        return site_to or site
+
+    def _send(self, task: str, robot: str, now: float) -> Outcome:
+        """The robot's goal on ``task`` (its part), due now (in ``Outcome.send``)."""
+        t, spec = self.tasks[task], self._specs[task]
+        site, site_to = self._sites(task)
+        # re-timed: a member that sets out later than expected moves the task's start
+        t.expected_end = max(t.expected_end, now + self._travel_time(robot, site) + float(spec.duration))
+        key = self._next_key
+        self._next_key += 1
+        self.goals[key] = Goal(key, task, robot, now, heard=now)
+        t.goals[robot] = self.robots[robot].goal = key
+        out = Outcome()
+        out.send.append(GoalSpec(key, task, robot, t.team, site, site_to or site,
+                                 tuple(n for n, _ in spec.requires), tuple(float(a) for _, a in spec.requires),
+                                 t.expected_end - float(spec.duration), float(spec.duration)))
+        out.news.append(GoalNews(GoalKind.SENT, task, robot, site=site))
+        return out
+
+    def _next(self, robot: str, now: float) -> Outcome:
+        """A robot free again: the goal of the next task it was given, if any."""
+        r = self.robots[robot]
+        if r.failed or self.busy_with(robot) or not r.queue:
+            return Outcome()
+        return self._send(r.queue.pop(0), robot, now)
 
     # -- the robots' answers ---------------------------------------------------------------
     def _goal(self, key: int, what: str, out: Outcome) -> Goal | None:
@@ -316,11 +369,11 @@ class Dispatch:
         t = self.tasks.get(g.task)
         out.changed = True
         if t is None or t.status != TaskStatus.ASSIGNED or t.goals.get(g.robot) != key:
-            return out  # a stopped goal that finished anyway: the robot is free
+            return out.add(self._next(g.robot, now))  # a stopped goal that finished anyway: the robot is free
         if g.working_since is None:
             g.working_since = max(g.sent, now - max(0.0, float(duration)))
         members = [self.goals[k] for k in t.goals.values()]
-        if all(m.state == GoalKind.SUCCEEDED for m in members):
+        if len(members) == len(t.team) and all(m.state == GoalKind.SUCCEEDED for m in members):
             t.status, t.end = TaskStatus.DONE, now
             t.start = min(now, max(m.working_since or m.sent for m in members))
             site_to = self._sites(g.task)[1]
@@ -330,6 +383,8 @@ class Dispatch:
                 if site_to and tr is not None and (tr.robot_speed[r.index] > 0 or r.site == site_to):
                     r.site = site_to
             self._refresh()
+            for m in members:  # "each": a member free now sets out for its next task
+                out.add(self._next(m.robot, now))
         return out
 
     def ended(self, key: int, now: float, kind: GoalKind, message: str) -> Outcome:
@@ -344,7 +399,7 @@ class Dispatch:
         out.news.append(GoalNews(kind, g.task, g.robot, message=message))
         out.changed = True
         if kind == GoalKind.CANCELED and g.cancelling:
-            return out
+            return out.add(self._next(g.robot, now))  # stopped on request: free, on to its next task
         if kind == GoalKind.LOST:
             out.cancel.append(key)  # best effort: a robot alive but silent stops, and answers (back then)
         r = self.robots[g.robot]
@@ -354,21 +409,40 @@ class Dispatch:
                          "answers again")
         t = self.tasks.get(g.task)
         if t is not None and t.status == TaskStatus.ASSIGNED and t.goals.get(g.robot) == key:
-            out.add(self._interrupt(g.task, f"{g.robot}'s goal {kind.name.lower()}"))
+            out.add(self._interrupt(g.task, f"{g.robot}'s goal {kind.name.lower()}", now))
+        out.add(self._release_queue(g.robot, now))
         return out
 
-    def _interrupt(self, task: str, why: str) -> Outcome:
+    def _release_queue(self, robot: str, now: float) -> Outcome:
+        """A robot out of the team: the tasks it was given and had not set out for go back
+        to READY, their other members released (never double-booked)."""
+        out, r = Outcome(), self.robots[robot]
+        while r.queue:
+            task = r.queue.pop(0)
+            if self.tasks[task].status == TaskStatus.ASSIGNED:
+                out.add(self._interrupt(task, f"{robot} left the team before it set out", now))
+        return out
+
+    def _interrupt(self, task: str, why: str, now: float) -> Outcome:
         """Cancel every other active goal of ``task`` and put it back to READY (QUEUED if
-        a prerequisite is not done); members are free once their goal has ended."""
+        a prerequisite is not done); members are free once their goal has ended. A member
+        that was given it while busy ("each") forgets it; one that succeeded on it already
+        sets out for its next task."""
         t, out = self.tasks[task], Outcome(changed=True)
         for key in t.goals.values():
             g = self.goals[key]
             if g.active and not g.cancelling:
                 g.cancelling = True
                 out.cancel.append(key)
+        team = t.team
+        for rid in team:
+            if task in self.robots[rid].queue:
+                self.robots[rid].queue.remove(task)
         t.status, t.team, t.goals, t.start, t.end = TaskStatus.READY, (), {}, None, None
         self._refresh()
         out.notes.append(f"task {task} interrupted ({why}): READY again, {len(out.cancel)} goal(s) cancelled")
+        for rid in team:
+            out.add(self._next(rid, now))
         return out
 
     def silent(self, now: float, timeout: float, available: Mapping[str, bool],
@@ -387,6 +461,7 @@ class Dispatch:
                 r.failed, r.failed_at = "lost", now
                 out.changed = True
                 out.notes.append(f"robot {rid}: its server is gone; it leaves the team until it answers again")
+                out.add(self._release_queue(rid, now))
         return out
 
     def rejoin(self, robot: str) -> Outcome:
@@ -425,7 +500,7 @@ class Dispatch:
             raise DispatchRefused(f"cancel: unknown task {task!r}")
         if t.status == TaskStatus.DONE:
             raise DispatchRefused(f"cancel: task {task!r} is done")
-        out = self._interrupt(task, "cancelled") if t.status == TaskStatus.ASSIGNED else Outcome(changed=True)
+        out = self._interrupt(task, "cancelled", now) if t.status == TaskStatus.ASSIGNED else Outcome(changed=True)
         out.notes = [f"task {task} cancelled ({len(out.cancel)} goal(s) cancelled)"]
         del self.tasks[task]
         for other in self.tasks.values():
@@ -445,8 +520,9 @@ class Dispatch:
         out = Outcome(changed=True)
         task = self.busy_with(robot)
         if task and self.tasks[task].status == TaskStatus.ASSIGNED:
-            out.add(self._interrupt(task, f"{robot} set failed"))
+            out.add(self._interrupt(task, f"{robot} set failed", now))
         r.failed, r.failed_at = "fault", now
+        out.add(self._release_queue(robot, now))
         out.notes.append(f"robot {robot} set failed")
         return out
 
@@ -461,11 +537,10 @@ class Dispatch:
             i, task = r.index, self.busy_with(rid)
             t = self.tasks.get(task)
             running = t is not None and t.status == TaskStatus.ASSIGNED
-            site = r.site
-            if t is not None and running and tr is not None:
-                site = self._sites(task)[1]
-            busy = max(0.0, t.expected_end - now) if t is not None and running else 0.0
-            robots.append(RobotInfo(rid, str(inst.robots[i].extra.get("kind", "robot")), not task,
+            # busy until its last task given ends, where that task leaves it ("each": tasks queued)
+            site = self._site_when_free(rid) if running or r.queue else r.site
+            busy = self._free_at(rid, now) - now if running or r.queue else 0.0
+            robots.append(RobotInfo(rid, str(inst.robots[i].extra.get("kind", "robot")), not self.engaged(rid),
                                     inst.robots[i].capabilities, inst.robots[i].payload,
                                     task if running else "", busy, r.pose, site,
                                     0.0 if tr is None else tr.robot_speed[i],
@@ -479,14 +554,17 @@ class Dispatch:
         tasks = []
         for j, spec in enumerate(inst.tasks):
             t = self.tasks[spec.id]
-            start = t.start if t.start is not None else t.assigned_at
+            # not started: when the subteam was sent off, or ("each") when its last member should be there
+            start = t.start if t.start is not None else \
+                t.expected_end - spec.duration if self.ahead else t.assigned_at
             sites = self._sites(spec.id) if tr is not None else ("", "")
             tasks.append(TaskInfo(spec.id, int(t.status), spec.capabilities, spec.payload, spec.duration, spec.after,
                                   t.team, start if t.status >= TaskStatus.ASSIGNED else None, t.end,
                                   sites[0], sites[1], tuple(float(a) for a in inst.task_needs[j, k:]),
                                   roles_code(spec.roles)))
         where = ((), ()) if tr is None else graph_sites(tr)
-        return GraphSnapshot(now, inst.capabilities, tuple(tasks), *where, inst.traits, inst.roles, inst.objective)
+        return GraphSnapshot(now, inst.capabilities, tuple(tasks), *where, inst.traits, inst.roles, inst.objective,
+                             inst.departure)
 
     def counts(self) -> dict[str, int]:
         """Tasks by status name, for progress lines."""

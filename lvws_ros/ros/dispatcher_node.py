@@ -103,9 +103,6 @@ class DispatcherNode(Node):
             raise ConfigError("no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
         self.cell_path = path
         self.cell = Dispatch(load_instance(path), present=[])
-        if self.cell.inst.departure != "together":  # the messages carry no departure: goals go to free robots
-            self.get_logger().warning(f"{path}: \"departure\": \"{self.cell.inst.departure}\" is planned offline "
-                                      "only; this cell's subteams are sent off together (docs/formats.md)")
         self.out = StatePublisher(
             self, lambda: (self.cell.team_snapshot(self.now()), self.cell.graph_snapshot(self.now())),
             str(_param(self, "protocol", "snapshots", "how the state goes out: snapshots (the whole team and task "
@@ -167,7 +164,10 @@ class DispatcherNode(Node):
         return not self.waiting
 
     def apply(self, out: Outcome) -> None:
-        """Publish what an input did: goal events, cancels, warnings, the new state."""
+        """Send the goals now due (departure each: a member free for its next task), publish
+        what an input did: goal events, cancels, warnings, the new state."""
+        for spec in out.send:
+            self.send(spec)
         now = self.now()
         for news in out.news:
             self.events_pub.publish(convert.goal_event_to_msg(news, now))

@@ -126,6 +126,9 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
     sim_params = ["-p", f"rate:={float(rate)}", "-p", f"summary:={summary}", "-p", f"expect_subscribers:={audience}",
                   "-p", f"sync:={'true' if sync else 'false'}", "-p", f"protocol:={protocol}",
                   "-p", f"retire_after:={float(retire_after)}"]
+    wait = float(str(sched.get("first_plan_wait", 0.0) or 0.0))  # the first decision waits that long for the plan:
+    if wait > 0:  # so does the simulator (its own wait for a decision is 5 s of wall time)
+        sim_params += ["-p", f"sync_timeout:={wait + 5.0}"]
     if gif is not None:
         sim_params += ["-p", f"gif:={gif}"]
     if config:

@@ -133,3 +133,44 @@ def test_the_snapshots_of_a_cell_of_traits_with_homes_and_of_a_cell_without_task
     assert empty.graph_snapshot(0.0).tasks == () and empty.done
     empty.add_tasks([CELL["tasks"][0]])
     assert status(empty, "carry") == TaskStatus.READY
+
+
+EACH = {**CELL, "departure": "each",
+        "tasks": [*CELL["tasks"], {"id": "fetch", "capabilities": [1, 0], "payload": 1, "duration": 1, "after": [],
+                                   "site": "a"}]}
+
+
+def test_departing_each_a_busy_member_is_given_its_next_task_and_its_goal_goes_out_once_it_is_free():
+    d = Dispatch(instance_from_dict(EACH))
+    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)  # both at a: carry takes them to b (5 m away)
+    later, out = d.assign("fetch", ["r1"], 1.0)  # r1 busy with carry: it will go back to a for it
+    assert later == [] and not out.send and status(d, "fetch") == TaskStatus.ASSIGNED
+    team = {r.id: r for r in d.team_snapshot(1.0).robots}
+    # busy until fetch ends: carry ends at 2, back from b to a (5 m at 1 m/s), 1 s of work; then at a
+    assert not team["r1"].available and team["r1"].current_task == "carry" and team["r1"].site == "a"
+    assert team["r1"].busy_for == pytest.approx(2.0 + 5.0 + 1.0 - 1.0)
+    fetch = next(t for t in d.graph_snapshot(1.0).tasks if t.id == "fetch")
+    assert fetch.start == pytest.approx(7.0) and fetch.assigned_robots == ("r1",)
+    d.succeeded(goals[0].key, 2.0, 2.0)
+    assert not d.succeeded(goals[0].key, 2.0, 2.0).send  # a repeated answer sends nothing
+    out = d.succeeded(goals[1].key, 2.5, 2.0)
+    assert [(g.robot, g.task, g.site) for g in out.send] == [("r1", "fetch", "a")]  # free: it sets out now
+    assert out.send[0].planned_start == pytest.approx(7.5)  # re-timed from when it is really free
+    assert d.busy_with("r1") == "fetch" and not d.robots["r1"].queue
+
+
+def test_departing_each_a_member_lost_releases_the_tasks_it_was_given_and_nothing_is_double_booked():
+    d = Dispatch(instance_from_dict(EACH))
+    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    assert d.assign("fetch", ["r2"], 0.5)[0] == []  # queued behind carry
+    out = d.ended(goals[1].key, 1.0, GoalKind.ABORTED, "wheel slip")  # r2 fails carry, and leaves
+    assert out.cancel == [goals[0].key]
+    assert status(d, "carry") == TaskStatus.READY and status(d, "fetch") == TaskStatus.READY  # both given again
+    assert not d.robots["r2"].queue and not out.send
+    with pytest.raises(DispatchRefused, match="out of the team"):
+        d.assign("fetch", ["r2"], 1.5)
+    again, _ = d.assign("fetch", ["r1"], 1.5)  # r1 still busy (its carry goal is being cancelled): queued
+    assert again == [] and d.robots["r1"].queue == ["fetch"]
+    out = d.ended(goals[0].key, 2.0, GoalKind.CANCELED, "")  # stopped on request: on to fetch
+    assert [(g.robot, g.task) for g in out.send] == [("r1", "fetch")]
+    assert d.engaged("r1") and {r.id for r in d.team_snapshot(2.0).robots} == {"r1", "arm"}

@@ -127,7 +127,7 @@ def _start(cmd: Sequence[str]) -> subprocess.Popen[str]:
 @contextmanager
 def cell(ros_context: Any, tmp_path: Path, name: str, robots: dict[str, Sequence[str]] | None = None,
          bag: Path | None = None, data: dict[str, Any] | None = None, sim_time: bool = False,
-         timeout: float = TIMEOUT) -> Iterator[Cell]:
+         timeout: float = TIMEOUT, policy: str = "grp") -> Iterator[Cell]:
     """Scheduler (grp), dispatcher and the fake robots (process name -> its arguments;
     default: one process for every robot), and a recorder when ``bag`` is given; with
     ``sim_time``, every node on a simulated clock (helpers/sim_clock.py, 4x wall time)."""
@@ -149,7 +149,7 @@ def cell(ros_context: Any, tmp_path: Path, name: str, robots: dict[str, Sequence
         if bag is not None:
             c.procs["recorder"] = _start([sys.executable, "-m", "lvws_ros.ros.recorder", "-o", str(bag)])
         c.procs["scheduler"] = _start([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args",
-                                       "-p", "policy:=grp", *sim])
+                                       "-p", f"policy:={policy}", *sim])
         c.procs["dispatcher"] = _start([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path), "--ros-args",
                                         "-p", f"robot_timeout:={timeout}", "-p", "rejoin_after:=2.0", *sim])
         assert c.spin(30, lambda: node.count_publishers(GOAL_EVENTS_TOPIC) > 0)  # no goal event goes unseen
@@ -194,11 +194,31 @@ def test_six_robots_with_subteams_travel_and_precedence_complete_and_the_bag_che
     assert report.returncode == 0 and "goals per robot" in report.stdout, report.stdout + report.stderr
 
 
-def test_a_robot_that_aborts_fails_its_task_which_is_planned_again_and_the_run_completes(ros_context, tmp_path):
+def never_double_booked(c: Cell) -> None:
+    """No robot ever had two goals at once (a goal runs from sent to its end)."""
+    ends = (GoalEvent.KIND_REJECTED, GoalEvent.KIND_SUCCEEDED, GoalEvent.KIND_ABORTED, GoalEvent.KIND_CANCELED,
+            GoalEvent.KIND_LOST)
+    open_goal: dict[str, str] = {}
+    for e in c.events:
+        if e.kind == GoalEvent.KIND_SENT:
+            assert e.robot_id not in open_goal, f"{e.robot_id} sent {e.task_id} while on {open_goal[e.robot_id]}"
+            open_goal[e.robot_id] = e.task_id
+        elif e.kind in ends and open_goal.get(e.robot_id) == e.task_id:
+            del open_goal[e.robot_id]
+
+
+# departure each: the node gives tasks to busy robots (auto's plan), the dispatcher holds each
+# member's goal until it is free; a member that aborts or is lost releases what it was given
+DEPARTURES = [("together", "grp"), ("each", "auto")]
+
+
+@pytest.mark.parametrize(("departure", "policy"), DEPARTURES)
+def test_a_robot_that_aborts_fails_its_task_which_is_planned_again_and_the_run_completes(ros_context, tmp_path,
+                                                                                         departure, policy):
     bag = tmp_path / "bag"
-    with cell(ros_context, tmp_path, "lvws_dispatch_abort", bag=bag,
-              robots={"robots": ["m1,m2,m3,s1,arm_b,arm_c",
-                                 *(a for m in ("m1", "m2", "m3") for a in ("--abort", f"{m}:t1"))]}) as c:
+    with cell(ros_context, tmp_path, "lvws_dispatch_abort", bag=bag, data={**CELL, "departure": departure},
+              policy=policy, robots={"robots": ["m1,m2,m3,s1,arm_b,arm_c",
+                                                *(a for m in ("m1", "m2", "m3") for a in ("--abort", f"{m}:t1"))]}) as c:
         # whichever lifters take t1 first abort it (each lifter once): its second subteam succeeds
         assert c.spin(60, c.done), c.output("dispatcher")
         c.spin(1.0, lambda: False)
@@ -207,12 +227,15 @@ def test_a_robot_that_aborts_fails_its_task_which_is_planned_again_and_the_run_c
     done = {e.task_id: e.robot_id for e in c.of(GoalEvent.KIND_SUCCEEDED)}
     assert "t1" in done and "t2" in done
     assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
+    never_double_booked(c)
 
 
-def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_used_once_back(ros_context, tmp_path):
+@pytest.mark.parametrize(("departure", "policy"), DEPARTURES)
+def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_used_once_back(ros_context, tmp_path,
+                                                                                            departure, policy):
     bag = tmp_path / "bag"
-    with cell(ros_context, tmp_path, "lvws_dispatch_kill", bag=bag,
-              robots={"robots": ["m1,m2,s1,arm_b,arm_c"], "m3": ["m3"]}) as c:
+    with cell(ros_context, tmp_path, "lvws_dispatch_kill", bag=bag, data={**CELL, "departure": departure},
+              policy=policy, robots={"robots": ["m1,m2,s1,arm_b,arm_c"], "m3": ["m3"]}) as c:
         assert c.spin(60, lambda: any(e.phase == "working" for e in c.of(GoalEvent.KIND_FEEDBACK, "m3")))
         task = c.of(GoalEvent.KIND_FEEDBACK, "m3")[-1].task_id
         c.procs["m3"].send_signal(signal.SIGKILL)
@@ -229,6 +252,7 @@ def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_us
     assert again  # back in the team, and used (t8 needs its paint)
     assert task in {e.task_id for e in c.events[lost:] if e.kind == GoalEvent.KIND_SUCCEEDED}  # planned again
     assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
+    never_double_booked(c)
 
 
 def test_a_cancel_answer_frees_a_lost_robot_only_when_its_goal_is_unknown_or_over():
@@ -437,3 +461,30 @@ def test_the_simulator_runs_an_instance_departing_each_members_setting_out_on_th
     apart = [a.task for a in rep.schedule.assignments
              if len({heading.get((r, a.task)) for r in a.robots} - {None}) > 1]
     assert apart, "every subteam set out together"
+
+
+def test_action_robots_departing_each_set_out_on_their_own_and_the_cell_completes_valid(tmp_path):
+    """A coalition benchmark's cell (20 robots, 50 tasks, travel, the way home, departure
+    each) through the dispatcher and fake robots: the node gives tasks to busy robots, the
+    dispatcher sends each member its goal once it is free, and the bag shows members of one
+    subteam sent off at different times; every task done, none failed, the report valid."""
+    from rosbags.highlevel import AnyReader
+
+    from lvws_ros.cli.report import report
+    from lvws_ros.ros.launcher import launch
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "dcmrta" / "env_0.json"
+    res = launch(robots="actions", instance=str(path), policy="auto", rate=10.0, bag_dir=tmp_path / "bags",
+                 out_dir=tmp_path / "out", name="each", gif=False, timeout=240.0, log=lambda _t: None)
+    assert res.summary["tasks_done"] == 50 and res.summary["failures"] == 0 and res.summary["refused"] == 0
+    rep = report(res.bag)
+    assert rep.complete and not rep.problems
+    sent: dict[str, list[int]] = {}  # task -> when each member's goal went out (ns)
+    with AnyReader([res.bag]) as reader:
+        conns = [c for c in reader.connections if c.topic.endswith("goal_events")]
+        for c, stamp, raw in reader.messages(connections=conns):
+            m = reader.deserialize(raw, c.msgtype)
+            if m.kind == GoalEvent.KIND_SENT:
+                sent.setdefault(m.task_id, []).append(stamp)
+    apart = [t for t, s in sent.items() if len(s) > 1 and max(s) - min(s) > 0.2e9]
+    assert apart, "every subteam was sent off together"

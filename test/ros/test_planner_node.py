@@ -45,7 +45,7 @@ def _planner_of(scheduler: int) -> int | None:
 
 def test_killing_the_planner_mid_run_the_run_completes_valid_and_the_planner_comes_back(tmp_path: Path):
     out = tmp_path / "out"
-    run = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "launch", "--rate", "2", "--no-gif", "--name",
+    run = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "launch", "--rate", "4", "--no-gif", "--name",
                             "kill", "--bag-dir", str(tmp_path / "bags"), "--out-dir", str(out), "--timeout", "300"],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
@@ -65,7 +65,7 @@ def test_killing_the_planner_mid_run_the_run_completes_valid_and_the_planner_com
         while not log.is_file() or "step 1:" not in log.read_text():
             assert time.monotonic() < deadline and run.poll() is None, "no decision"
             time.sleep(0.2)
-        time.sleep(5.0)  # a few decisions from the plan (sim time runs at 2x)
+        time.sleep(2.5)  # a few decisions from the plan (sim time runs at 4x)
         os.kill(planner, signal.SIGKILL)
         text = run.communicate(timeout=400)[0]
     finally:
