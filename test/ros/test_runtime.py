@@ -296,9 +296,9 @@ def test_replay_republishes_every_message_of_the_reference_bag(ros_context):
 
 
 def _replay(bag: Path, extra: list[str], executor: Any, node: Any, done: Any) -> tuple[subprocess.Popen, str]:
-    """Run ``lvws replay BAG`` at 5x while spinning ``executor`` until it ends and, for up
+    """Run ``lvws replay BAG`` at 10x while spinning ``executor`` until it ends and, for up
     to 2 s more, until ``done()``; the process and its output (``node`` is destroyed)."""
-    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "replay", str(bag), "--rate", "5",
+    proc = subprocess.Popen([sys.executable, "-m", "lvws_ros.cli", "replay", str(bag), "--rate", "10",
                              "--wait-for-subscribers", "3", *extra], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     try:
