@@ -19,6 +19,13 @@ Rules:
   ends), the task returns READY (QUEUED if a prerequisite was cancelled meanwhile) with no
   subteam, and the robot leaves the team (it vanishes from the snapshots) until
   :meth:`Dispatch.rejoin`.
+* ``"departure": "each"``: a task may be given to busy members. A busy member's goal is
+  held in its queue and goes out (:attr:`Outcome.send`) the moment it is free (the task it
+  serves is done, or its goal ended on a cancel), with ``planned_start`` re-timed to when
+  it can be there. A member that leaves the team (rejected, aborted, lost, set failed)
+  also gives back the tasks it was given and had not set out for: each returns READY, its
+  other members' goals cancelled or dropped from their queues. A robot never has two
+  goals at once.
 * Bad input never raises out of the answers of robots: a result, feedback or answer for a
   goal that is already over (cancelled, lost, or an older goal) is ignored and named in
   the returned notes. An assignment or a service call that cannot be carried out raises
@@ -148,6 +155,7 @@ class _Task:
     start: float | None = None
     end: float | None = None
     goals: dict[str, int] = field(default_factory=dict)  # robot -> goal key of the current attempt
+    planned_start: float = 0.0  # when its last member should be there (re-timed as members set out)
 
 
 class Dispatch:
@@ -227,7 +235,9 @@ class Dispatch:
     # -- the scheduler's assignments -------------------------------------------------------
     def assign(self, task: str, team: Sequence[str], now: float) -> tuple[list[GoalSpec], Outcome]:
         """Goals for ``team`` to do ``task`` (DispatchRefused naming the item when the task
-        is unknown or not READY, or a member unknown, out of the team or busy)."""
+        is unknown or not READY, or a member unknown, out of the team, or busy while the
+        cell sends subteams off together). With ``"departure": "each"`` a busy member's
+        goal is held until it is free (:attr:`Outcome.send` then)."""
         t = self.tasks.get(task)
         what = f"assignment {task} <- {'+'.join(team)}"
         if t is None:
@@ -250,7 +260,7 @@ class Dispatch:
         start = max(self._free_at(rid, now) + self._travel_time(rid, site, self._site_when_free(rid))
                     for rid in team)
         t.status, t.team, t.assigned_at, t.start, t.end = TaskStatus.ASSIGNED, tuple(team), now, None, None
-        t.expected_end, t.goals = start + self._specs[task].duration, {}
+        t.planned_start, t.expected_end, t.goals = start, start + self._specs[task].duration, {}
         out = Outcome(changed=True)
         for rid in team:
             if self.engaged(rid):
@@ -270,6 +280,7 @@ class Dispatch:
         return bool(self.busy_with(robot) or self.robots[robot].queue)
 
     def _last_task(self, robot: str) -> _Task | None:
+        """The last task the robot was given (queued, else the one it serves), if any."""
         r = self.robots[robot]
         last = r.queue[-1] if r.queue else self.busy_with(robot)
         return self.tasks.get(last) if last else None
@@ -280,6 +291,7 @@ class Dispatch:
         return max(now, t.expected_end) if t is not None and t.status == TaskStatus.ASSIGNED else now
 
     def _site_when_free(self, robot: str) -> str:
+        """Where the robot will be once free: where its last task given leaves it."""
         r, t = self.robots[robot], self._last_task(robot)
         if t is None or self.inst.travel is None:
             return r.site
@@ -291,7 +303,8 @@ class Dispatch:
         t, spec = self.tasks[task], self._specs[task]
         site, site_to = self._sites(task)
         # re-timed: a member that sets out later than expected moves the task's start
-        t.expected_end = max(t.expected_end, now + self._travel_time(robot, site) + float(spec.duration))
+        t.planned_start = max(t.planned_start, now + self._travel_time(robot, site))
+        t.expected_end = t.planned_start + float(spec.duration)
         key = self._next_key
         self._next_key += 1
         self.goals[key] = Goal(key, task, robot, now, heard=now)
@@ -299,7 +312,7 @@ class Dispatch:
         out = Outcome()
         out.send.append(GoalSpec(key, task, robot, t.team, site, site_to or site,
                                  tuple(n for n, _ in spec.requires), tuple(float(a) for _, a in spec.requires),
-                                 t.expected_end - float(spec.duration), float(spec.duration)))
+                                 t.planned_start, float(spec.duration)))
         out.news.append(GoalNews(GoalKind.SENT, task, robot, site=site))
         return out
 
@@ -519,9 +532,9 @@ class Dispatch:
             return self.rejoin(robot)
         out = Outcome(changed=True)
         task = self.busy_with(robot)
+        r.failed, r.failed_at = "fault", now  # first: the interrupt sends it nothing more
         if task and self.tasks[task].status == TaskStatus.ASSIGNED:
             out.add(self._interrupt(task, f"{robot} set failed", now))
-        r.failed, r.failed_at = "fault", now
         out.add(self._release_queue(robot, now))
         out.notes.append(f"robot {robot} set failed")
         return out
@@ -555,8 +568,7 @@ class Dispatch:
         for j, spec in enumerate(inst.tasks):
             t = self.tasks[spec.id]
             # not started: when the subteam was sent off, or ("each") when its last member should be there
-            start = t.start if t.start is not None else \
-                t.expected_end - spec.duration if self.ahead else t.assigned_at
+            start = t.start if t.start is not None else t.planned_start if self.ahead else t.assigned_at
             sites = self._sites(spec.id) if tr is not None else ("", "")
             tasks.append(TaskInfo(spec.id, int(t.status), spec.capabilities, spec.payload, spec.duration, spec.after,
                                   t.team, start if t.status >= TaskStatus.ASSIGNED else None, t.end,

@@ -208,9 +208,13 @@ def _replay_changes(run: Run) -> None:
     tasks that retired are kept aside (:meth:`Run.whole_graph`)."""
     if not run.changes or not run.teams or not run.graphs:
         return
-    cell = LiveCell(run.teams[0], run.graphs[0])
-    teams, graphs = [run.teams[0]], [run.graphs[0]]
-    said = {t.id: t for t in run.graphs[0].tasks}  # each task as the world last sent it
+    # the first snapshot pair (a world may have sent a TaskGraph alone before its first robot
+    # was up: the pair is the graph stamped as the first TeamState); what was recorded stays
+    team0 = run.teams[0]
+    graph0 = next((g for g in run.graphs if abs(g.stamp - team0.stamp) < 1e-9), run.graphs[0])
+    cell = LiveCell(team0, graph0)
+    teams, graphs = list(run.teams), list(run.graphs)
+    said = {t.id: t for t in graph0.tasks}  # each task as the world last sent it
     for ch in sorted(run.changes, key=lambda c: c.seq):
         if ch.seq <= cell.seq:
             continue

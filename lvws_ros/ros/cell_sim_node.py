@@ -52,7 +52,8 @@ from lvws_ros.sim.world import CellSim, Event
 DESCRIPTION = (
     "pymunk assembly-cell simulator of the paper's case study. ROS parameters: config (YAML, default "
     "the shipped config/assembly_cell.yaml), rate (sim/wall speed-up, default 10), sync (pause at "
-    "decision steps until answered, default true), sync_timeout (wall s), expect_subscribers (start once "
+    "decision steps until answered, default true), sync_timeout (wall s), first_sync_timeout (wall s, the first "
+    "decision's; default sync_timeout), expect_subscribers (start once "
     "this many nodes subscribe, default 1), wait_for_subscribers (wall s), "
     "max_sim_time (s), summary (JSON path), gif (animated GIF path), frame_every (sim s between GIF frames), "
     "events (scripted world events, YAML), stuck_grace (wall s a run waits for a repair after a service made a "
@@ -132,6 +133,8 @@ class CellSimNode(Node):
         self.rate = float(self.declare_parameter("rate", 10.0).value)
         self.sync = bool(self.declare_parameter("sync", True).value)
         self.sync_timeout = float(self.declare_parameter("sync_timeout", 5.0).value)
+        # the first decision may wait for the planner's first plan (the scheduler's first_plan_wait)
+        self.first_sync_timeout = float(self.declare_parameter("first_sync_timeout", self.sync_timeout).value)
         self.wait_subs = float(self.declare_parameter("wait_for_subscribers", 20.0).value)
         self.expect_subs = int(self.declare_parameter("expect_subscribers", 1).value)
         self.max_sim_time = float(self.declare_parameter("max_sim_time", 3600.0).value)
@@ -355,9 +358,10 @@ class CellSimNode(Node):
         if self.finished:
             return
         if self.waiting_since is not None:
-            if time.monotonic() - self.waiting_since < self.sync_timeout:
+            limit = self.sync_timeout if self.decisions else self.first_sync_timeout
+            if time.monotonic() - self.waiting_since < limit:
                 return
-            self.get_logger().warn(f"t={self.sim.time:.2f}: no decision within {self.sync_timeout:g} s; running on")
+            self.get_logger().warn(f"t={self.sim.time:.2f}: no decision within {limit:g} s; running on")
             self.waiting_since = None
         self.advance()
         self.publish_clock()

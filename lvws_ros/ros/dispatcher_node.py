@@ -31,6 +31,7 @@ from unique_identifier_msgs.msg import UUID
 
 from lvws_ros.core.dispatch import Dispatch, GoalKind, GoalSpec, Outcome
 from lvws_ros.core.formats import load_instance
+from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
 from lvws_ros.errors import ConfigError, DispatchRefused, LvwsError
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main, spin_once
@@ -104,7 +105,7 @@ class DispatcherNode(Node):
         self.cell_path = path
         self.cell = Dispatch(load_instance(path), present=[])
         self.out = StatePublisher(
-            self, lambda: (self.cell.team_snapshot(self.now()), self.cell.graph_snapshot(self.now())),
+            self, self.snapshots,
             str(_param(self, "protocol", "snapshots", "how the state goes out: snapshots (the whole team and task "
                        "graph each time) or changes (those once, then numbered CellChanges; docs/ros.md)")),
             float(_param(self, "retire_after", -1.0, "protocol changes: seconds after which done work retires "
@@ -137,6 +138,11 @@ class DispatcherNode(Node):
 
     def now(self) -> float:
         return float(self.get_clock().now().nanoseconds) / 1e9
+
+    def snapshots(self) -> tuple[TeamSnapshot, GraphSnapshot]:
+        """The team and task graph now, with one stamp."""
+        now = self.now()
+        return self.cell.team_snapshot(now), self.cell.graph_snapshot(now)
 
     # -- publishing ----------------------------------------------------------------------
     def publish_state(self) -> None:

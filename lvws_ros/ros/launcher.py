@@ -127,8 +127,8 @@ def _commands(bag: Path, *, policy: str | None, seed: int | None, model_path: st
                   "-p", f"sync:={'true' if sync else 'false'}", "-p", f"protocol:={protocol}",
                   "-p", f"retire_after:={float(retire_after)}"]
     wait = float(str(sched.get("first_plan_wait", 0.0) or 0.0))  # the first decision waits that long for the plan:
-    if wait > 0:  # so does the simulator (its own wait for a decision is 5 s of wall time)
-        sim_params += ["-p", f"sync_timeout:={wait + 5.0}"]
+    if wait > 0:  # so does the simulator, for that decision (its own wait is 5 s of wall time)
+        sim_params += ["-p", f"first_sync_timeout:={wait + 5.0}"]
     if gif is not None:
         sim_params += ["-p", f"gif:={gif}"]
     if config:
@@ -199,8 +199,12 @@ def _param(value: object) -> str:
 
 
 def _check_inputs(policy: str | None, model_path: str, config: str, params_file: str | None,
-                  events: str | None = None, namespace: str = "") -> dict[str, Any]:
+                  events: str | None = None, namespace: str = "", instance: str = "") -> dict[str, Any]:
     """Every input checked before anything starts; the parameter file's scheduler values."""
+    if instance:
+        from lvws_ros.core.formats import load_instance
+
+        load_instance(instance)
     from lvws_ros.registry import POLICY_NAMES
     from lvws_ros.ros.resources import case_study_config
     from lvws_ros.ros.scheduler_node import check_params_file
@@ -326,11 +330,7 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     namespace = check_namespace(namespace, "--namespace")
     if dashboard is not None:
         check_port("127.0.0.1", dashboard)  # before anything starts
-    in_file = _check_inputs(policy, model_path, config, params_file, events, namespace)
-    if instance:
-        from lvws_ros.core.formats import load_instance
-
-        load_instance(instance)  # checked before anything starts
+    in_file = _check_inputs(policy, model_path, config, params_file, events, namespace, instance)
     run, bag, out = _run_dirs(name, namespace, policy or str(in_file.get("policy", DEFAULT_POLICY)), bag_dir, out_dir)
     summary_path = out / "summary.json"
     gif_path = out / "run.gif"

@@ -101,7 +101,7 @@ class InstanceWorld:
         if self.status[j] != TaskStatus.READY or (not ahead and any(self.queue[r] for r in team)):
             raise PolicyError(f"task {task!r} with {list(robots)}: not ready, or a member is busy")
         tr = inst.travel
-        leave = [max(self.time, float(self.free[r])) for r in team]
+        leave = [max(self.time, float(self.free[r])) if ahead else self.time for r in team]
         arrive = [0.0 if tr is None else tr.arrival([r], [self.site[r]], j) for r in team]
         if math.isinf(max(arrive)):
             raise PolicyError(f"task {task!r}: a fixed member of {list(robots)} is elsewhere")

@@ -174,3 +174,14 @@ def test_departing_each_a_member_lost_releases_the_tasks_it_was_given_and_nothin
     out = d.ended(goals[0].key, 2.0, GoalKind.CANCELED, "")  # stopped on request: on to fetch
     assert [(g.robot, g.task) for g in out.send] == [("r1", "fetch")]
     assert d.engaged("r1") and {r.id for r in d.team_snapshot(2.0).robots} == {"r1", "arm"}
+
+
+def test_departing_each_a_robot_set_failed_after_its_part_is_sent_nothing_and_gives_back_its_queue():
+    d = Dispatch(instance_from_dict(EACH))
+    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    d.assign("fetch", ["r1"], 0.5)  # queued behind carry
+    d.succeeded(goals[0].key, 2.0, 2.0)  # r1 did its part; it stays with carry until r2 is done
+    out = d.fault("r1", True, 2.5)
+    assert not out.send and d.robots["r1"].failed == "fault" and not d.robots["r1"].queue
+    assert status(d, "carry") == TaskStatus.READY and status(d, "fetch") == TaskStatus.READY
+    assert out.cancel == [goals[1].key]

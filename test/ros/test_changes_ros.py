@@ -239,3 +239,24 @@ def test_retirement_without_changes_and_an_unknown_protocol_are_refused_with_exi
     out = subprocess.run([sys.executable, "-m", *cmd], capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
     assert "protocol" in out.stderr
+
+
+def test_a_changes_bag_whose_world_sent_its_graph_alone_first_rebuilds_the_pair_the_node_decided_on(tmp_path):
+    """A dispatcher publishes its TaskGraph alone until a robot is up, then the pair: the
+    decisions name the pair's stamps, which the bag's rebuilt states must hold."""
+    from lvws_ros.cli.report import decision_inputs
+    from lvws_ros.core.changes import CellChanges as Batch
+    from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskInfo, TeamSnapshot
+    from lvws_ros.ros.bag import Run, _replay_changes
+
+    task = TaskInfo("t1", 1, (1,), 1.0, 2.0)
+    robot = RobotInfo("r1", "amr", True, (1,), 2.0)
+    alone = GraphSnapshot(5.0, ("lift",), (task,))
+    run = Run(tmp_path, {}, teams=[TeamSnapshot(7.0, ("lift",), (robot,))],
+              graphs=[alone, GraphSnapshot(7.0, ("lift",), (task,))],
+              changes=[Batch(1, 8.0, robots=(RobotInfo("r1", "amr", False, (1,), 2.0, "t1", 2.0),))])
+    run.decisions = [OnlineDecision(0, (("t1", ("r1",)),), (), 0.001, 7.0, 7.0)]
+    _replay_changes(run)
+    [(_d, team, graph, _state)] = list(decision_inputs(run))
+    assert team.stamp == graph.stamp == 7.0 and [t.id for t in graph.tasks] == ["t1"]
+    assert run.teams[-1].stamp == run.graphs[-1].stamp == 8.0  # and the batch after it
