@@ -110,8 +110,10 @@ def report_run(run: Run) -> RunReport:
     if not run.teams or not run.graphs:
         raise BagError(f"{run.path}: no team state or task graph recorded")
     graph = run.whole_graph()  # done work that retired included
-    # a world on wall time (a dispatcher's: seconds since 1970) counts from its first state
-    origin = run.teams[0].stamp if run.teams[0].stamp > WALL_CLOCK else 0.0
+    # a world on wall time (a dispatcher's: seconds since 1970) counts from its first state,
+    # or from the first start when a recorder that joined late missed that state
+    starts = [t.start for t in graph.tasks if t.start is not None]
+    origin = min([run.teams[0].stamp, *starts]) if run.teams[0].stamp > WALL_CLOCK else 0.0
     inst, sched = executed(run.teams, graph, run.path.name, origin)
     policy = run.decisions[0].policy if run.decisions else "?"
     sched.policy = policy

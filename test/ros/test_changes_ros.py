@@ -260,3 +260,19 @@ def test_a_changes_bag_whose_world_sent_its_graph_alone_first_rebuilds_the_pair_
     [(_d, team, graph, _state)] = list(decision_inputs(run))
     assert team.stamp == graph.stamp == 7.0 and [t.id for t in graph.tasks] == ["t1"]
     assert run.teams[-1].stamp == run.graphs[-1].stamp == 8.0  # and the batch after it
+
+
+def test_a_wall_clock_bag_that_missed_the_first_state_counts_from_the_first_start(tmp_path):
+    """A recorder that joined a dispatcher's cell late: its first TeamState is after the
+    first task started; the report's times count from that start, never below 0."""
+    from lvws_ros.cli.report import report_run
+    from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot
+    from lvws_ros.ros.bag import Run
+
+    t0 = 1.8e9  # seconds since 1970
+    done = TaskInfo("t1", 3, (1,), 1.0, 2.0, (), ("r1",), t0, t0 + 2.0)
+    run = Run(tmp_path, {}, teams=[TeamSnapshot(t0 + 0.4, ("lift",), (RobotInfo("r1", "amr", True, (1,), 2.0),))],
+              graphs=[GraphSnapshot(t0 + 2.0, ("lift",), (done,))])
+    rep = report_run(run)
+    assert rep.complete and not rep.problems
+    assert rep.schedule.assignments[0].start == 0.0 and rep.schedule.makespan == 2.0
