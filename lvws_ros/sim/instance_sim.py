@@ -14,8 +14,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
 from lvws_ros.core.problem import Instance
@@ -89,15 +87,12 @@ class InstanceSim:
     def step(self) -> list[Event]:
         """``cfg.dt`` sim seconds on, or to the end of the next task within them."""
         w = self.world
-        running = np.flatnonzero(w.status == TaskStatus.ASSIGNED)
-        ends = w.start[running] + w.actual[running]
-        if not len(running) or float(ends.min()) > w.time + self.cfg.dt:
+        end = w.next_end()
+        if end is None or end > w.time + self.cfg.dt:
             w.time += self.cfg.dt
             return []
-        before = w.status.copy()
-        w.step()
         return [Event(w.time, "finished", self.inst.tasks[j].id, tuple(self.inst.robots[r].id for r in w.team[j]))
-                for j in np.flatnonzero((w.status == TaskStatus.DONE) & (before != TaskStatus.DONE)).tolist()]
+                for j in w.step()]
 
     def team_snapshot(self) -> TeamSnapshot:
         return self.world.team_snapshot()

@@ -115,18 +115,26 @@ class InstanceWorld:
             if tr is not None:
                 self.site[r] = tr.task_to[j]
 
-    def step(self) -> None:
-        """To the next end of a task; its robots are free where it leaves them."""
+    def next_end(self) -> float | None:
+        """When the next task given ends (None: nothing was given)."""
         running = np.flatnonzero(self.status == TaskStatus.ASSIGNED)
-        if not len(running):
+        return float((self.start[running] + self.actual[running]).min()) if len(running) else None
+
+    def step(self) -> list[int]:
+        """To the next end of a task; its robots are free where it leaves them. Returns the
+        tasks that ended."""
+        end = self.next_end()
+        if end is None:
             raise PolicyError(f"t={self.time:g}: nothing runs and nothing was started: the run cannot go on")
-        ends = self.start[running] + self.actual[running]
-        self.time = float(ends.min())
-        for j in running[ends <= self.time + 1e-9]:
+        self.time = end
+        running = np.flatnonzero(self.status == TaskStatus.ASSIGNED)
+        ended = running[self.start[running] + self.actual[running] <= end + 1e-9].tolist()
+        for j in ended:
             self.status[j] = TaskStatus.DONE
             for r in self.team[j]:
                 self.queue[r].remove(j)
         self._ready()
+        return ended
 
     def team_snapshot(self) -> TeamSnapshot:
         inst, tr = self.inst, self.inst.travel
