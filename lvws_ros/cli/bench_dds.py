@@ -97,6 +97,7 @@ def dds_latency(family: str, n: int, m: int, seed: int, pace: float, protocol: s
     """The run (module docstring)."""
     from lvws_ros.cli.bench_scale import cell_snapshots, make_instance
     from lvws_ros.core.executor import State, TaskStatus
+    from lvws_ros.core.online import is_due
     from lvws_ros.ros import convert
 
     os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(150, 200))
@@ -120,8 +121,7 @@ def dds_latency(family: str, n: int, m: int, seed: int, pace: float, protocol: s
             t0 = _publish(w, cell_snapshots(state))
             free, ready = set(state.free_robots()), set(state.ready_tasks())
             running = bool((state.task_status == TaskStatus.ASSIGNED).any())
-            due = bool((free - seen_free or ready - seen_ready or not running) and free and ready)
-            if not due:
+            if not is_due(free, ready, seen_free, seen_ready, running, ahead=inst.departure == "each"):
                 seen_free, seen_ready = free, ready
                 _spin(w, 0.005)
             else:

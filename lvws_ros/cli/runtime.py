@@ -140,10 +140,6 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from lvws_ros.cli.report import report
     from lvws_ros.ros.launcher import launch
 
-    if args.instance and args.robots != "actions" and (args.config or args.events):
-        print(f"lvws launch: --instance runs the simulator on the instance file alone; "
-              f"{'--config' if args.config else '--events'} is for an assembly-cell configuration", file=sys.stderr)
-        return 2
     if args.retire_after >= 0 and args.protocol != "changes":
         print("lvws launch: --retire-after needs --protocol changes (a snapshot world sends every task)",
               file=sys.stderr)

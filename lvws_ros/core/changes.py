@@ -21,7 +21,7 @@ pair of snapshots into the next (what a world that keeps snapshots sends).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator, Set
 from dataclasses import dataclass, replace
 
 from lvws_ros.core.executor import TaskStatus
@@ -39,7 +39,8 @@ from lvws_ros.core.online import (
 )
 from lvws_ros.errors import InstanceError
 
-__all__ = ["CellChanges", "ChangeFollower", "ChangeGap", "ChangeRefused", "LiveCell", "changes_between"]
+__all__ = ["CellChanges", "ChangeFollower", "ChangeGap", "ChangeRefused", "LiveCell", "changes_between",
+           "without_retired"]
 
 _QUEUED, _READY, _ASSIGNED, _DONE = (int(s) for s in (TaskStatus.QUEUED, TaskStatus.READY, TaskStatus.ASSIGNED,
                                                       TaskStatus.DONE))
@@ -67,6 +68,20 @@ class CellChanges:
     @property
     def size(self) -> int:
         return len(self.tasks) + len(self.cancelled) + len(self.retired) + len(self.robots) + len(self.left)
+
+
+def without_retired(tasks: Iterable[TaskInfo], retired: Set[str]) -> Iterator[TaskInfo]:
+    """``tasks`` less those in ``retired``, and none naming a retired task as a prerequisite
+    (retired work is done: nothing waits on it). A task that names none is the very same object."""
+    for t in tasks:
+        if t.id not in retired:
+            yield _unnamed(t, retired)
+
+
+def _unnamed(t: TaskInfo, retired: Set[str]) -> TaskInfo:
+    if retired.isdisjoint(t.prerequisites):
+        return t
+    return replace(t, prerequisites=tuple(p for p in t.prerequisites if p not in retired))
 
 
 class ChangeGap(InstanceError):
@@ -107,7 +122,7 @@ class LiveCell:
         """Take a snapshot pair as the cell as of change ``seq`` (a resync); tasks retired
         before are left out of it, and its tasks no longer name them."""
         if self.retired & {t.id for t in graph.tasks}:
-            graph = replace(graph, tasks=tuple(self._unretired(graph.tasks)))
+            graph = replace(graph, tasks=tuple(without_retired(graph.tasks, self.retired)))
         check_team(team)
         check_graph(graph)
         self.seq = seq
@@ -126,14 +141,6 @@ class LiveCell:
                 self.dependents.setdefault(p, set()).add(t.id)
         self.done: set[str] = {t.id for t in graph.tasks if t.status == _DONE}  # candidates to retire
         self._snaps: tuple[TeamSnapshot, GraphSnapshot] | None = (team, graph)
-
-    def _unretired(self, tasks: Iterable[TaskInfo]) -> Iterable[TaskInfo]:
-        for t in tasks:
-            if t.id in self.retired:
-                continue
-            if self.retired.intersection(t.prerequisites):
-                t = replace(t, prerequisites=tuple(p for p in t.prerequisites if p not in self.retired))
-            yield t
 
     # -- taking a batch ----------------------------------------------------------------
     def apply(self, ch: CellChanges) -> None:
@@ -200,7 +207,7 @@ class LiveCell:
         for t in ch.tasks:
             if t.id in self.retired:
                 continue  # never comes back
-            self._put(self._unretired_task(t))
+            self._put(_unnamed(t, self.retired))
         for tid in ch.cancelled:
             self._drop(tid)
         for tid in ch.retired:
@@ -218,11 +225,6 @@ class LiveCell:
             self.until.pop(rid, None)
         self.stamp = max(self.stamp, ch.stamp)
         self._snaps = None
-
-    def _unretired_task(self, t: TaskInfo) -> TaskInfo:
-        if self.retired.intersection(t.prerequisites):
-            return replace(t, prerequisites=tuple(p for p in t.prerequisites if p not in self.retired))
-        return t
 
     def _put(self, t: TaskInfo) -> None:
         old = self.tasks.get(t.id)

@@ -39,7 +39,7 @@ import functools
 import graphlib
 import math
 import time
-from collections.abc import Container, Mapping, Sequence
+from collections.abc import Container, Mapping, Sequence, Set
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -575,6 +575,15 @@ def same_cell(before: tuple[TeamSnapshot, GraphSnapshot], now: tuple[TeamSnapsho
             for a, b in zip(g0.tasks, g1.tasks, strict=True))
 
 
+def is_due(free: Set[Any], ready: Set[Any], seen_free: Set[Any], seen_ready: Set[Any], running: bool,
+           ahead: bool = False) -> bool:
+    """When a decision is due: a robot free or a task ready that is new since the last look,
+    or nothing running (waiting would stall); and a ready task with a free robot, or with
+    any robot when ``ahead`` (departure each: busy robots may be given tasks)."""
+    new = bool(free - seen_free) or bool(ready - seen_ready) or not running
+    return new and bool(free or ahead) and bool(ready)
+
+
 def close_policy(policy: Policy | None) -> None:
     """Call the policy's ``close`` when it has one (a policy that runs a process)."""
     close = getattr(policy, "close", None)
@@ -736,10 +745,8 @@ class OnlineScheduler:
         state = build_state(inst, self.team, self._view, {k: v[0] for k, v in self.pending.items()})
         free = frozenset(inst.robots[i].id for i in state.free_robots())
         ready = frozenset(inst.tasks[j].id for j in state.ready_tasks())
-        due = bool(free - self._seen_free) or bool(ready - self._seen_ready)
-        due |= not (state.task_status == TaskStatus.ASSIGNED).any()  # nothing runs: waiting would stall
-        ahead = inst.departure == "each"  # busy robots may be given tasks: a new ready task is due
-        if not (due and (free or ahead) and ready):
+        running = bool((state.task_status == TaskStatus.ASSIGNED).any())
+        if not is_due(free, ready, self._seen_free, self._seen_ready, running, ahead=inst.departure == "each"):
             self._seen_free, self._seen_ready = free, ready
             return None
         decision = self.decide_state(state, started)  # if it raises, the same state is due again

@@ -46,7 +46,7 @@ from lvws_ros.ros.resources import case_study_config
 from lvws_ros.ros.state_publisher import StatePublisher
 from lvws_ros.sim.config import ARM_KINDS, load_cell_config
 from lvws_ros.sim.events import WorldEvent, apply_event, load_events, stuck_reason
-from lvws_ros.sim.instance_sim import InstanceSim
+from lvws_ros.sim.instance_sim import InstanceSim, check_alone
 from lvws_ros.sim.world import CellSim, Event
 
 DESCRIPTION = (
@@ -69,9 +69,7 @@ ROBOT_COLORS = {"panda": (1.0, 0.5, 0.0), "jackal": (0.1, 0.4, 0.9), "husky": (0
 
 def instance_sim(path: str, config: str, events: str, noise: float, noise_seed: int) -> InstanceSim:
     """The world of an instance file (ConfigError for a config or scripted events beside it)."""
-    if config or events:
-        raise ConfigError(f"instance {path}: runs alone; {'config' if config else 'events'} is for an "
-                          "assembly-cell config")
+    check_alone(path, config, events)
     return InstanceSim(load_instance(path), noise=noise, noise_seed=noise_seed)
 
 

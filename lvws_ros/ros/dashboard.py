@@ -338,14 +338,12 @@ class LiveFeed:
         world's snapshots asked for on the resync service at the first batch, on a gap or on
         a batch that cannot apply; the cell they describe shown as the latest team and graph."""
         from lvws_msgs.msg import CellChanges
-        from lvws_msgs.srv import Resync
 
         from lvws_ros.core.changes import ChangeFollower
         from lvws_ros.ros import convert, topics
+        from lvws_ros.ros.change_feed import ChangeFeed
 
         follower, log = ChangeFollower(), self.node.get_logger()
-        asking: list[Any] = []  # the resync call in flight
-        client = self.node.create_client(Resync, topics.RESYNC_SERVICE)
 
         def show() -> None:
             while follower.notices:
@@ -355,24 +353,24 @@ class LiveFeed:
                 view.take("teams", team)
                 view.take("graphs", graph)
 
-        def resynced(future: Any) -> None:
-            asking.clear()
-            res = future.result()
+        def resynced(res: Any) -> None:
+            if res is None:
+                return
             try:
                 follower.resync(convert.team_from_msg(res.team), convert.graph_from_msg(res.graph), int(res.seq))
             except LvwsError as exc:
                 log.warning(f"resync snapshots ignored: {exc}")
             show()
 
+        feed = ChangeFeed(self.node, follower, resynced)
+
         def take(msg: Any) -> None:
-            try:
-                follower.take(convert.changes_from_msg(msg))
-            except (TypeError, ValueError) as exc:
-                log.warning(f"CellChanges {msg.seq} ignored: {exc}")
-                follower.needs_resync = True
-            if follower.needs_resync and not asking and client.service_is_ready():
-                asking.append(client.call_async(Resync.Request()))
-                asking[0].add_done_callback(resynced)
+            batch, why = feed.read(msg)
+            if batch is None:
+                log.warning(why)
+            else:
+                follower.take(batch)
+                feed.ask()
             show()
 
         self.node.create_subscription(CellChanges, topics.CHANGES_TOPIC, take, topics.CHANGES_QOS)

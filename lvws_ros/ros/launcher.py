@@ -199,11 +199,15 @@ def _param(value: object) -> str:
 
 
 def _check_inputs(policy: str | None, model_path: str, config: str, params_file: str | None,
-                  events: str | None = None, namespace: str = "", instance: str = "") -> dict[str, Any]:
+                  events: str | None = None, namespace: str = "", instance: str = "",
+                  robots: str = "sim") -> dict[str, Any]:
     """Every input checked before anything starts; the parameter file's scheduler values."""
     if instance:
         from lvws_ros.core.formats import load_instance
+        from lvws_ros.sim.instance_sim import check_alone
 
+        if robots != "actions":  # the simulator runs it
+            check_alone(instance, config, events or "")
         load_instance(instance)
     from lvws_ros.registry import POLICY_NAMES
     from lvws_ros.ros.resources import case_study_config
@@ -330,7 +334,7 @@ def launch(*, policy: str | None = None, seed: int | None = None, model_path: st
     namespace = check_namespace(namespace, "--namespace")
     if dashboard is not None:
         check_port("127.0.0.1", dashboard)  # before anything starts
-    in_file = _check_inputs(policy, model_path, config, params_file, events, namespace, instance)
+    in_file = _check_inputs(policy, model_path, config, params_file, events, namespace, instance, robots)
     run, bag, out = _run_dirs(name, namespace, policy or str(in_file.get("policy", DEFAULT_POLICY)), bag_dir, out_dir)
     summary_path = out / "summary.json"
     gif_path = out / "run.gif"

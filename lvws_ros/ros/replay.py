@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.utilities import remove_ros_args
 from rosbags.highlevel import AnyReader
 
@@ -35,6 +36,7 @@ from lvws_ros.ros.topics import message_class
 # Replay publishes faster than the recording at --rate > 1; a deeper history than the
 # recorded one keeps reliable subscribers from losing messages to overwrites.
 REPLAY_MIN_DEPTH = 1000
+DRAIN_SECONDS = 5.0  # at the end, how long a publisher waits for its reliable subscribers' acknowledgements
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("bag", help="rosbag2 folder (metadata.yaml + .mcap)")
     p.add_argument("--rate", type=float, default=1.0, help="speed-up of the recorded timing (default 1)")
     p.add_argument("--wait-for-subscribers", type=float, default=2.0,
-                   help="wall seconds to let subscribers discover the publishers first")
+                   help="wall seconds at most to let subscribers discover the publishers first (over as soon "
+                        "as every topic has one)")
     p.add_argument("--topics", nargs="*", default=None, help="only these topics")
     return p
 
@@ -64,8 +67,8 @@ def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[s
             convert = _converters(reader, conns, path)
             pubs = {c.id: node.create_publisher(message_class(c.msgtype), c.topic, qos_from_bag(c, REPLAY_MIN_DEPTH))
                     for c in conns}
-            end = time.monotonic() + wait
-            while time.monotonic() < end:
+            end = time.monotonic() + wait  # until every topic has a subscriber, or the wait is over
+            while time.monotonic() < end and not all(p.get_subscription_count() for p in pubs.values()):
                 rclpy.spin_once(node, timeout_sec=0.05)
             t_bag0: int | None = None
             t_wall0 = time.monotonic()
@@ -80,9 +83,8 @@ def replay(bag: str | Path, rate: float = 1.0, wait: float = 2.0, topics: list[s
                 else:
                     pubs[conn.id].publish(bytes(raw))
                 sent[conn.topic] = sent.get(conn.topic, 0) + 1
-            end = time.monotonic() + 0.5  # let reliable messages drain
-            while time.monotonic() < end:
-                rclpy.spin_once(node, timeout_sec=0.05)
+            for pub in pubs.values():  # a reliable message is delivered before the publisher goes
+                pub.wait_for_all_acked(Duration(seconds=DRAIN_SECONDS))
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

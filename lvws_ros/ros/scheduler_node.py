@@ -39,13 +39,11 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from lvws_msgs.msg import AssignmentArray, CellChanges, TaskGraph, TeamState
-from lvws_msgs.srv import Resync
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
-from rclpy.task import Future as RclpyFuture
 
 from lvws_ros.core.changes import ChangeFollower
 from lvws_ros.core.executor import Policy
@@ -53,6 +51,7 @@ from lvws_ros.core.online import OnlineDecision, OnlineScheduler, close_policy
 from lvws_ros.errors import ConfigError, LvwsError
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES, make_policy
 from lvws_ros.ros import convert, topics
+from lvws_ros.ros.change_feed import ChangeFeed
 from lvws_ros.ros.entry import node_main
 from lvws_ros.sim.config import read_yaml
 
@@ -269,8 +268,8 @@ class SchedulerNode(LifecycleNode):
         self.create_subscription(TaskGraph, topics.GRAPH_TOPIC, self.on_graph, topics.GRAPH_QOS)
         self.create_subscription(CellChanges, topics.CHANGES_TOPIC, self.on_changes, topics.CHANGES_QOS)
         self.follower = ChangeFollower(float(values["retire_after"]))  # the world's changes, once it sends some
-        self.resync_client = self.create_client(Resync, topics.RESYNC_SERVICE)
-        self.resync_pending: RclpyFuture | None = None
+        self.feed = ChangeFeed(self, self.follower, lambda res: self.guarded(lambda: self.resynced(res)),
+                               self.when_idle)
         self.snapshots_ignored = 0  # snapshot messages of a world that speaks changes (its resync is the truth)
         self.step_started = 0.0  # perf_counter: the arrival of the state the decision in flight answers
         self.last_state_latency = 0.0
@@ -405,12 +404,9 @@ class SchedulerNode(LifecycleNode):
         apply: a WARN and a resync), then the cell as it now is goes to the core."""
         self.received += 1
         self.arrived = time.perf_counter()
-        try:
-            batch = convert.changes_from_msg(msg)
-        except (TypeError, ValueError) as exc:
-            self.report(DiagnosticStatus.WARN, f"CellChanges {msg.seq} ignored: {exc}; asking for a snapshot")
-            self.follower.needs_resync = True
-            self.request_resync()
+        batch, why = self.feed.read(msg)
+        if batch is None:
+            self.report(DiagnosticStatus.WARN, why)
             return
         self.when_idle(lambda: self.guarded(lambda: self.follow(lambda: self.follower.take(batch))))
 
@@ -419,7 +415,7 @@ class SchedulerNode(LifecycleNode):
         changed = take()
         while self.follower.notices:
             self.report(DiagnosticStatus.WARN, self.follower.notices.pop(0))
-        self.request_resync()
+        self.feed.ask()
         if changed and self.follower.cell is not None:
             self.latest.pop("TeamState", None)
             self.latest.pop("TaskGraph", None)
@@ -435,18 +431,8 @@ class SchedulerNode(LifecycleNode):
         self.offer("TeamState", lambda: core.offer_team(team))
         self.offer("TaskGraph", lambda: core.offer_graph(graph))
 
-    def request_resync(self) -> None:
-        """Ask the world for its snapshots (one request at a time) when the follower needs them."""
-        if not self.follower.needs_resync or self.resync_pending is not None:
-            return
-        if not self.resync_client.service_is_ready():
-            return  # on_settle asks again
-        pending = self.resync_pending = self.resync_client.call_async(Resync.Request())
-        pending.add_done_callback(lambda f: self.when_idle(lambda: self.guarded(lambda: self.resynced(f))))
-
-    def resynced(self, future: RclpyFuture) -> None:
-        self.resync_pending = None
-        res = future.result()
+    def resynced(self, res: Any) -> None:
+        """The world's answer to a resync request (``None``: the call failed)."""
         if res is None:
             return
         self.arrived = time.perf_counter()
@@ -519,7 +505,7 @@ class SchedulerNode(LifecycleNode):
             self.unsynced_since = time.monotonic()
 
     def on_settle(self) -> None:
-        self.request_resync()
+        self.feed.ask()
         if self.in_flight is None and self.unsynced_since is not None \
                 and time.monotonic() - self.unsynced_since > SETTLE_SECONDS:
             self.unsynced_since = None

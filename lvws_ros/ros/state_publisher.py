@@ -16,7 +16,7 @@ from lvws_msgs.msg import CellChanges, TaskGraph, TeamState
 from lvws_msgs.srv import Resync
 from rclpy.node import Node
 
-from lvws_ros.core.changes import LiveCell, changes_between
+from lvws_ros.core.changes import LiveCell, changes_between, without_retired
 from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
 from lvws_ros.errors import ConfigError
 from lvws_ros.ros import convert, topics
@@ -68,9 +68,7 @@ class StatePublisher:
             if self.said is None:
                 self.said = LiveCell(*self.sent)
             self.retired.update(self.said.retire(self.retire_after))  # DONE already sent, dependents started
-            graph = replace(graph, tasks=tuple(
-                replace(t, prerequisites=tuple(p for p in t.prerequisites if p not in self.retired))
-                for t in graph.tasks if t.id not in self.retired))
+            graph = replace(graph, tasks=tuple(without_retired(graph.tasks, self.retired)))
         self.seq += 1
         batch = changes_between(self.sent, (team, graph), self.seq)
         if self.said is not None:  # it retired them already

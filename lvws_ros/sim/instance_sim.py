@@ -18,11 +18,19 @@ from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Assignment, Schedule
-from lvws_ros.errors import AssignmentRejected, PolicyError, WorldEventRejected
+from lvws_ros.errors import AssignmentRejected, ConfigError, PolicyError, WorldEventRejected
 from lvws_ros.sim.instance_world import InstanceWorld, check_noise
 from lvws_ros.sim.world import Event
 
-__all__ = ["InstanceSim"]
+__all__ = ["InstanceSim", "check_alone"]
+
+
+def check_alone(instance: str, config: str = "", events: str = "") -> None:
+    """An instance file is the whole world: ConfigError when an assembly-cell config or
+    scripted events are given beside it."""
+    if instance and (config or events):
+        raise ConfigError(f"instance {instance}: runs alone; {'config' if config else 'events'} is for an "
+                          "assembly-cell configuration")
 
 UNCHANGING = "the simulator runs an instance file, which does not change while it runs (submit, cancel and " \
              "faults are served by an assembly-cell config)"

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lvws_ros.core.changes import CellChanges, ChangeGap, ChangeRefused, LiveCell, changes_between
+from lvws_ros.core.changes import CellChanges, ChangeGap, ChangeRefused, LiveCell, changes_between, without_retired
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
@@ -237,3 +237,12 @@ def test_a_batch_costs_what_it_changes_not_the_cell() -> None:
     _, g = cell.snapshots()
     assert all(a is b for a, b in zip(g.tasks[4:5000], graph.tasks[4:], strict=True))
     assert g.tasks[-1].id == "new" and cell.dependents["t7"] == {"new"}
+
+
+def test_without_retired_drops_retired_tasks_and_their_names_and_keeps_the_others_the_same_objects():
+    a, b = TaskInfo("a", D, (1, 0), 1.0, 1.0), TaskInfo("b", Q, (0, 1), 1.0, 1.0, ("a", "c"))
+    c, d = TaskInfo("c", R, (1, 0), 1.0, 1.0), TaskInfo("d", R, (1, 0), 1.0, 1.0)
+    kept = list(without_retired((a, b, c, d), {"a"}))
+    assert [t.id for t in kept] == ["b", "c", "d"]
+    assert kept[0].prerequisites == ("c",) and kept[1] is c and kept[2] is d
+    assert list(without_retired((a, b), set())) == [a, b] and list(without_retired((a, b), set()))[1] is b

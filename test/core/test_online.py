@@ -321,3 +321,17 @@ def test_a_budget_counts_from_when_the_decision_began():
     assert policy.clock is None
     policy.budget_ms = None
     assert decision_deadline(policy) is None
+
+
+@pytest.mark.parametrize(("free", "ready", "seen_free", "seen_ready", "running", "ahead", "due"), [
+    ({"r1"}, {"t1"}, set(), set(), True, False, True),  # both new
+    ({"r1"}, {"t1"}, {"r1"}, {"t1"}, True, False, False),  # nothing new, something runs: wait
+    ({"r1"}, {"t1"}, {"r1"}, {"t1"}, False, False, True),  # nothing runs: waiting would stall
+    (set(), {"t1"}, set(), set(), True, False, False),  # a new task, every robot busy
+    (set(), {"t1"}, set(), set(), True, True, True),  # departing each: busy robots may be given it
+    ({"r1"}, set(), set(), set(), False, True, False),  # nothing ready
+])
+def test_a_decision_is_due_by_one_rule(free, ready, seen_free, seen_ready, running, ahead, due):
+    from lvws_ros.core.online import is_due
+
+    assert is_due(free, ready, seen_free, seen_ready, running, ahead) is due

@@ -222,7 +222,7 @@ POLICIES = ["grp", "rand", "rand_subteam", "lvws", "dbgm", "lvws_sample", "exact
 def test_every_policy_is_valid_on_trait_instances(family):
     """The trait families, and the weld cell: traits alone, roles, travel, a fixed arm and
     the objective "return"."""
-    for index in range(1 if family == "weld-cell" else 4):
+    for index in range({"weld-cell": 1, "warehouse": 2}.get(family, 4)):  # the warehouse's are the largest
         inst = load_instance(EXAMPLE) if family == "weld-cell" else family_instance(family, index, 0)
         for name in [*POLICIES, "auto"] if family == "weld-cell" else POLICIES:
             opts = {"time_limit": 2, "workers": 2} if name == "exact" else {}  # valid at any limit
