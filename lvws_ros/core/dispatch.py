@@ -233,11 +233,12 @@ class Dispatch:
         return g.task if g.active or running else ""
 
     # -- the scheduler's assignments -------------------------------------------------------
-    def assign(self, task: str, team: Sequence[str], now: float) -> tuple[list[GoalSpec], Outcome]:
-        """Goals for ``team`` to do ``task`` (DispatchRefused naming the item when the task
-        is unknown or not READY, or a member unknown, out of the team, or busy while the
-        cell sends subteams off together). With ``"departure": "each"`` a busy member's
-        goal is held until it is free (:attr:`Outcome.send` then)."""
+    def assign(self, task: str, team: Sequence[str], now: float) -> Outcome:
+        """Give ``task`` to ``team``: the goals due now in :attr:`Outcome.send`, as every
+        input gives them (DispatchRefused naming the item when the task is unknown or not
+        READY, or a member unknown, out of the team, or busy while the cell sends subteams
+        off together). With ``"departure": "each"`` a busy member's goal is held until it
+        is free (and goes out in the outcome of what frees it)."""
         t = self.tasks.get(task)
         what = f"assignment {task} <- {'+'.join(team)}"
         if t is None:
@@ -267,8 +268,7 @@ class Dispatch:
                 self.robots[rid].queue.append(task)  # its goal goes out once it is free
             else:
                 out.add(self._send(task, rid, now))
-        goals, out.send = out.send, []
-        return goals, out
+        return out
 
     @property
     def ahead(self) -> bool:

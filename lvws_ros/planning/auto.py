@@ -62,6 +62,7 @@ class PlannedAutoPolicy:
         self.follower: PlanFollower | None = None
         self.grp = GreedyPayloadPolicy(priority="critical-path")
         self.report: PlanReport | None = None  # the latest plan's
+        self.decided_at = 0.0  # the time of the latest decision's state (the cell's clock)
         self.notices: list[str] = []  # for the node's diagnostics
         self.fallbacks = 0  # decisions taken by GRP (no plan yet, or the planner's process gone)
         self.restarts = 0  # the planner's process started again after it died
@@ -93,6 +94,7 @@ class PlannedAutoPolicy:
             self.process.start()
 
     def decide(self, state: State) -> Decision:
+        self.decided_at = state.time
         if self.background:
             return self._decide_beside(state)
         if self.follower is None:
@@ -149,7 +151,8 @@ class PlannedAutoPolicy:
         r = self.report
         if r is None:
             return [("plan", "none yet"), ("planner_restarts", str(self.restarts))]
-        return [("plan_makespan", f"{r.makespan:g}"), ("plan_bound", f"{r.bound:g}"), ("plan_gap", f"{r.gap:.4f}"),
+        return [("plan_makespan", f"{r.makespan:.3f}"), ("plan_left", f"{r.makespan - self.decided_at:.3f}"),
+                ("plan_bound", f"{r.bound:.3f}"), ("plan_gap", f"{r.gap:.4f}"),
                 ("plan_source", r.source), ("plan_proven", str(r.proven).lower()),
                 ("planner_restarts", str(self.restarts))]
 

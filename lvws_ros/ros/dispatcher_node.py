@@ -200,14 +200,12 @@ class DispatcherNode(Node):
     def on_assignments(self, msg: AssignmentArray) -> None:
         for a in msg.assignments:
             try:
-                goals, out = self.cell.assign(a.task_id, list(a.robot_ids), self.now())
+                out = self.cell.assign(a.task_id, list(a.robot_ids), self.now())
             except DispatchRefused as exc:
                 self.counts["refused"] += 1
                 self.warn(f"decision {msg.decision_step}: {exc}")
                 continue
-            for spec in goals:
-                self.send(spec)
-            self.apply(out)
+            self.apply(out)  # its goals go out
 
     def send(self, spec: GoalSpec) -> None:
         server = self.servers[spec.robot]

@@ -27,7 +27,8 @@ def status(d: Dispatch, task: str) -> int:
 def test_a_subteam_task_is_done_when_every_member_succeeded_and_leaves_them_at_its_end_site():
     d = Dispatch(instance_from_dict(CELL))
     assert status(d, "carry") == TaskStatus.READY and status(d, "weld") == TaskStatus.QUEUED
-    goals, out = d.assign("carry", ["r1", "r2"], 10.0)
+    out = d.assign("carry", ["r1", "r2"], 10.0)
+    goals = out.send
     assert [g.robot for g in goals] == ["r1", "r2"] and out.changed
     assert goals[0].site == "a" and goals[0].site_to == "b" and goals[0].planned_start == 10.0
     assert status(d, "carry") == TaskStatus.ASSIGNED
@@ -50,7 +51,7 @@ def test_a_subteam_task_is_done_when_every_member_succeeded_and_leaves_them_at_i
 
 def test_a_member_that_aborts_fails_the_task_the_others_are_cancelled_and_it_leaves_until_it_rejoins():
     d = Dispatch(instance_from_dict(CELL))
-    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    goals = d.assign("carry", ["r1", "r2"], 0.0).send
     d.feedback(goals[1].key, 1.0, "travelling", 0.1, "")
     out = d.ended(goals[0].key, 2.0, GoalKind.ABORTED, "gripper jammed")
     assert out.cancel == [goals[1].key] and out.changed
@@ -71,7 +72,7 @@ def test_a_member_that_aborts_fails_the_task_the_others_are_cancelled_and_it_lea
 
 def test_a_silent_goal_is_lost_and_a_free_robot_whose_server_is_gone_leaves():
     d = Dispatch(instance_from_dict(CELL))
-    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    goals = d.assign("carry", ["r1", "r2"], 0.0).send
     d.feedback(goals[0].key, 4.0, "travelling", 0.2, "")
     out = d.silent(5.5, 5.0, {})
     assert out.cancel == [goals[1].key, goals[0].key]  # the lost goal too: a robot alive but silent stops
@@ -106,7 +107,7 @@ def test_submitted_and_cancelled_tasks_change_the_graph_and_a_cancel_stops_the_r
     d.add_tasks([{"id": "polish", "capabilities": [0, 1], "payload": 0, "duration": 1, "after": ["weld"],
                   "site": "b"}])
     assert status(d, "polish") == TaskStatus.QUEUED
-    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    goals = d.assign("carry", ["r1", "r2"], 0.0).send
     out = d.cancel("carry", 1.0)
     assert sorted(out.cancel) == sorted(g.key for g in goals)
     assert [t.id for t in d.graph_snapshot(1.0).tasks] == ["weld", "polish"]
@@ -142,9 +143,9 @@ EACH = {**CELL, "departure": "each",
 
 def test_departing_each_a_busy_member_is_given_its_next_task_and_its_goal_goes_out_once_it_is_free():
     d = Dispatch(instance_from_dict(EACH))
-    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)  # both at a: carry takes them to b (5 m away)
-    later, out = d.assign("fetch", ["r1"], 1.0)  # r1 busy with carry: it will go back to a for it
-    assert later == [] and not out.send and status(d, "fetch") == TaskStatus.ASSIGNED
+    goals = d.assign("carry", ["r1", "r2"], 0.0).send  # both at a: carry takes them to b (5 m away)
+    out = d.assign("fetch", ["r1"], 1.0)  # r1 busy with carry: it will go back to a for it
+    assert out.send == [] and out.changed and status(d, "fetch") == TaskStatus.ASSIGNED
     team = {r.id: r for r in d.team_snapshot(1.0).robots}
     # busy until fetch ends: carry ends at 2, back from b to a (5 m at 1 m/s), 1 s of work; then at a
     assert not team["r1"].available and team["r1"].current_task == "carry" and team["r1"].site == "a"
@@ -161,15 +162,15 @@ def test_departing_each_a_busy_member_is_given_its_next_task_and_its_goal_goes_o
 
 def test_departing_each_a_member_lost_releases_the_tasks_it_was_given_and_nothing_is_double_booked():
     d = Dispatch(instance_from_dict(EACH))
-    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
-    assert d.assign("fetch", ["r2"], 0.5)[0] == []  # queued behind carry
+    goals = d.assign("carry", ["r1", "r2"], 0.0).send
+    assert d.assign("fetch", ["r2"], 0.5).send == []  # queued behind carry
     out = d.ended(goals[1].key, 1.0, GoalKind.ABORTED, "wheel slip")  # r2 fails carry, and leaves
     assert out.cancel == [goals[0].key]
     assert status(d, "carry") == TaskStatus.READY and status(d, "fetch") == TaskStatus.READY  # both given again
     assert not d.robots["r2"].queue and not out.send
     with pytest.raises(DispatchRefused, match="out of the team"):
         d.assign("fetch", ["r2"], 1.5)
-    again, _ = d.assign("fetch", ["r1"], 1.5)  # r1 still busy (its carry goal is being cancelled): queued
+    again = d.assign("fetch", ["r1"], 1.5).send  # r1 still busy (its carry goal is being cancelled): queued
     assert again == [] and d.robots["r1"].queue == ["fetch"]
     out = d.ended(goals[0].key, 2.0, GoalKind.CANCELED, "")  # stopped on request: on to fetch
     assert [(g.robot, g.task) for g in out.send] == [("r1", "fetch")]
@@ -178,7 +179,7 @@ def test_departing_each_a_member_lost_releases_the_tasks_it_was_given_and_nothin
 
 def test_departing_each_a_robot_set_failed_after_its_part_is_sent_nothing_and_gives_back_its_queue():
     d = Dispatch(instance_from_dict(EACH))
-    goals, _ = d.assign("carry", ["r1", "r2"], 0.0)
+    goals = d.assign("carry", ["r1", "r2"], 0.0).send
     d.assign("fetch", ["r1"], 0.5)  # queued behind carry
     d.succeeded(goals[0].key, 2.0, 2.0)  # r1 did its part; it stays with carry until r2 is done
     out = d.fault("r1", True, 2.5)

@@ -6,6 +6,7 @@ node says so with a WARN and the planner comes back."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -86,7 +87,7 @@ def test_killing_the_planner_mid_run_the_run_completes_valid_and_the_planner_com
     sources = {d.get("plan_source") for d in diags if d.get("plan_source")}
     assert sources, "the plan's figures never reached diagnostics"
     after = [d for d in diags if "plan_makespan" in d]
-    assert after and float(after[-1]["plan_makespan"]) > 0
+    assert after and float(after[-1]["plan_makespan"]) > 0 and math.isfinite(float(after[-1]["plan_left"]))
 
 
 def _answers(got: list[Any], now: float) -> list[Any]:
