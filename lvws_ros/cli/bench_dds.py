@@ -92,13 +92,49 @@ def _publish(w: dict[str, Any], now: tuple[Any, Any]) -> float:
     return t0
 
 
+def _answer(w: dict[str, Any], node: subprocess.Popen[bytes], inst: Any, state: Any, out: DdsRun,
+            t0: float) -> tuple[set[int], set[int]]:
+    """Wait for the decision answering the state's stamp, count its latency (the first
+    apart) and start what it assigns; the robots started and the tasks it named (what the
+    world could not start is counted as skipped)."""
+    from lvws_ros.ros import convert
+
+    stamp, k = state.time, len(w["got"])
+
+    def hits() -> list[tuple[float, Any]]:
+        return [(t, mm) for t, mm in w["got"][k:] if abs(convert.from_time(mm.team_stamp) - stamp) < 1e-9]
+    _spin(w, ANSWER_WAIT, lambda: bool(hits()))
+    hit = hits()
+    if not hit:
+        if node.poll() is not None:
+            raise RuntimeError(f"the scheduler node exited ({node.returncode}); "
+                               "LVWS_DDS_NODE_LOG=FILE keeps its output")
+        out.missing += 1
+        return set(), set()
+    t, mm = hit[0]
+    ms = 1000 * (t - t0)
+    if out.first_ms != out.first_ms:  # nan: the cell's first decision
+        out.first_ms = ms
+    else:
+        out.seen_ms.append(ms)
+        out.node_ms.append(1000 * convert.from_time(mm.state_latency))
+    started: set[int] = set()
+    for a in mm.assignments:
+        j, team = inst.task_index[a.task_id], [inst.robot_index[r] for r in a.robot_ids]
+        if j in state.ready_tasks() and all(r in state.free_robots() for r in team):
+            state.start(j, team)
+            started.update(team)
+        else:
+            out.skipped += 1
+    return started, {inst.task_index[a.task_id] for a in mm.assignments}
+
+
 def dds_latency(family: str, n: int, m: int, seed: int, pace: float, protocol: str,
                 policy: str = "auto") -> DdsRun:
     """The run (module docstring)."""
     from lvws_ros.cli.bench_scale import cell_snapshots, make_instance
     from lvws_ros.core.executor import State, TaskStatus
     from lvws_ros.core.online import is_due
-    from lvws_ros.ros import convert
 
     os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(150, 200))
     log = open(os.environ.get("LVWS_DDS_NODE_LOG", os.devnull), "w")
@@ -125,36 +161,8 @@ def dds_latency(family: str, n: int, m: int, seed: int, pace: float, protocol: s
                 seen_free, seen_ready = free, ready
                 _spin(w, 0.005)
             else:
-                stamp = state.time
-                k = len(w["got"])
-
-                def answered(k: int = k, stamp: float = stamp) -> bool:
-                    return any(abs(convert.from_time(mm.team_stamp) - stamp) < 1e-9 for _, mm in w["got"][k:])
-                _spin(w, ANSWER_WAIT, answered)
-                hit = [(t, mm) for t, mm in w["got"][k:] if abs(convert.from_time(mm.team_stamp) - stamp) < 1e-9]
-                if not hit:
-                    if node.poll() is not None:
-                        raise RuntimeError(f"the scheduler node exited ({node.returncode}); "
-                                           "LVWS_DDS_NODE_LOG=FILE keeps its output")
-                    out.missing += 1
-                else:
-                    t, mm = hit[0]
-                    ms = 1000 * (t - t0)
-                    if out.first_ms != out.first_ms:  # nan: the cell's first decision
-                        out.first_ms = ms
-                    else:
-                        out.seen_ms.append(ms)
-                        out.node_ms.append(1000 * convert.from_time(mm.state_latency))
-                    started: set[int] = set()
-                    for a in mm.assignments:
-                        j, team = inst.task_index[a.task_id], [inst.robot_index[r] for r in a.robot_ids]
-                        if j in state.ready_tasks() and all(r in state.free_robots() for r in team):
-                            state.start(j, team)
-                            started.update(team)
-                            seen_ready.discard(j)
-                        else:
-                            out.skipped += 1
-                    seen_free, seen_ready = free - started, ready - {inst.task_index[a.task_id] for a in mm.assignments}
+                started, named = _answer(w, node, inst, state, out, t0)
+                seen_free, seen_ready = free - started, ready - named
             nxt = state.next_event_time()
             if nxt is None:
                 raise RuntimeError(f"no progress at t={state.time} (missing decisions: {out.missing})")
