@@ -26,6 +26,7 @@ from lvws_ros.core.online import (
     build_state,
     roles_of,
     scheduling_view,
+    sent_at,
     still_pending,
     trait_pairs,
 )
@@ -203,7 +204,7 @@ def decision_inputs(run: Run, ack_timeout: float = 5.0) -> Iterator[tuple[Online
         pending = still_pending(pending, graph, now, ack_timeout, team)
         yield d, team, graph, build_state(inst, team, view, {k: v[0] for k, v in pending.items()})
         for task, robots in d.assignments:
-            pending[task] = (tuple(robots), now)
+            pending[task] = (tuple(robots), sent_at(d, now))
 
 
 def verify(bag: str | Path, *, policy: str | None = None, seed: int = 0, model_path: str | None = None,

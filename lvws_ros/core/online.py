@@ -21,8 +21,9 @@ Robustness (the rules the scheduler node follows, whatever a message holds):
   a finite number is busy for as long as the longest task.
 * A task is ready only if it is READY *and* all its prerequisites are DONE (checked
   here, not trusted).
-* Assignments the world has not acknowledged within ``ack_timeout`` seconds, or whose
-  task or robots vanished from the latest snapshots, are released.
+* Assignments the world has not acknowledged within ``ack_timeout`` seconds of being sent
+  (the decision's snapshots' time plus the time it took), or whose task or robots vanished
+  from the latest snapshots, are released.
 
 * Fallback: when the main policy cannot serve a step (it raises, e.g. a model that
   refuses the instance or gives non-finite rewards, or its decision breaks Eqs. 8-11),
@@ -523,13 +524,21 @@ def _robot_sites(inst: Instance, team: TeamSnapshot) -> np.ndarray | None:
 
 def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: GraphSnapshot, now: float,
                   ack_timeout: float, team: TeamSnapshot | None = None) -> dict[str, tuple[tuple[str, ...], float]]:
-    """The assignments (task -> (robots, time sent)) the world has not acknowledged yet:
-    a task no longer READY was acknowledged (or is gone); one older than ``ack_timeout``
-    was never taken and is offered again; one whose robots left ``team`` is released."""
+    """The assignments (task -> (robots, since)) the world has not acknowledged yet: a
+    task no longer READY was acknowledged (or is gone); one not taken ``ack_timeout``
+    seconds after ``since`` (:func:`sent_at`) is offered again; one whose robots left
+    ``team`` is released."""
     status = {t.id: t.status for t in graph.tasks}
     robots = None if team is None else {r.id for r in team.robots}
     return {k: v for k, v in pending.items() if status.get(k) == TaskStatus.READY and now - v[1] <= ack_timeout
             and (robots is None or set(v[0]) <= robots)}
+
+
+def sent_at(decision: OnlineDecision, now: float) -> float:
+    """When a decision made on the snapshots of time ``now`` went out: ``now`` plus the time
+    it took (its ``latency``: a first plan awaited can take longer than ``ack_timeout``, and
+    the world cannot take what it has not been sent)."""
+    return now + decision.latency
 
 
 def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:
@@ -604,7 +613,7 @@ class OnlineScheduler:
         self.restart_jump = restart_jump
         self.team: TeamSnapshot | None = None
         self.graph: GraphSnapshot | None = None
-        self.pending: dict[str, tuple[tuple[str, ...], float]] = {}  # task -> (robots, when)
+        self.pending: dict[str, tuple[tuple[str, ...], float]] = {}  # task -> (robots, since: still_pending)
         self.step = 0
         self.dropped = 0  # out-of-order snapshots
         self.restarts = 0
@@ -751,7 +760,7 @@ class OnlineScheduler:
             return None
         decision = self.decide_state(state, started)  # if it raises, the same state is due again
         for task, robots in decision.assignments:
-            self.pending[task] = (robots, now)
+            self.pending[task] = (robots, sent_at(decision, now))
         self._seen_free = free - {r for _, team in decision.assignments for r in team}
         self._seen_ready = ready - {t for t, _ in decision.assignments}
         return decision

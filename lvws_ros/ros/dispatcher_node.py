@@ -198,14 +198,17 @@ class DispatcherNode(Node):
 
     # -- assignments and goals -----------------------------------------------------------
     def on_assignments(self, msg: AssignmentArray) -> None:
+        """A decision, taken whole: its goals go out and the cell's state is published once,
+        with every assignment it took (a state in between would show the scheduler a
+        decision half taken)."""
+        out, now = Outcome(), self.now()
         for a in msg.assignments:
             try:
-                out = self.cell.assign(a.task_id, list(a.robot_ids), self.now())
+                out.add(self.cell.assign(a.task_id, list(a.robot_ids), now))
             except DispatchRefused as exc:
                 self.counts["refused"] += 1
                 self.warn(f"decision {msg.decision_step}: {exc}")
-                continue
-            self.apply(out)  # its goals go out
+        self.apply(out)
 
     def send(self, spec: GoalSpec) -> None:
         server = self.servers[spec.robot]

@@ -93,6 +93,38 @@ def test_unacknowledged_assignments_are_offered_again_after_the_timeout():
     assert {t for t, _ in again.assignments} == {t for t, _ in first.assignments}
 
 
+class _Slow:
+    """GRP that takes ``seconds`` to decide (a first plan awaited)."""
+
+    def __init__(self, seconds: float) -> None:
+        self.grp, self.seconds, self.name = make_policy("grp"), seconds, "slow"
+
+    def reset(self, instance):
+        self.grp.reset(instance)
+
+    def decide(self, state):
+        time.sleep(self.seconds)
+        return self.grp.decide(state)
+
+
+def test_the_ack_timeout_counts_from_when_a_slow_decision_went_out_not_from_its_snapshots():
+    sim = CellSim(load_cell_config(CASE_STUDY))
+    online = OnlineScheduler(_Slow(0.3), ack_timeout=0.2)
+    online.offer_team(sim.team_snapshot())
+    online.offer_graph(sim.graph_snapshot())
+    first = online.decide()
+    assert first is not None and first.latency >= 0.3
+    # 0.35 s on, before the world took it (every task still READY): sent 0.05 s ago, still pending
+    online.offer_team(dataclasses.replace(sim.team_snapshot(), stamp=0.35))
+    online.offer_graph(dataclasses.replace(sim.graph_snapshot(), stamp=0.35))
+    assert online.decide() is None and set(online.pending) == {t for t, _ in first.assignments}
+    # 0.6 s on, still not taken: the timeout is over, they are offered again
+    online.offer_team(dataclasses.replace(sim.team_snapshot(), stamp=0.6))
+    online.offer_graph(dataclasses.replace(sim.graph_snapshot(), stamp=0.6))
+    again = online.decide()
+    assert again is not None and {t for t, _ in again.assignments} == {t for t, _ in first.assignments}
+
+
 def test_capabilities_must_agree():
     sim, online = fresh()
     team = sim.team_snapshot()
