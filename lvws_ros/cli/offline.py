@@ -36,8 +36,8 @@ def _print_auto(policy: Any, args: argparse.Namespace) -> None:
     improved, quick = report.improved, getattr(policy, "quick_makespan", float("nan"))
     print(f"auto: planned {report.seconds:.1f} s ({report.rounds} improvement rounds): quick plan "
           f"{quick:g}, final plan {report.makespan:g} by {report.source}, improved by CP-SAT "
-          f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)} and by "
-          f"sampling {improved.get('sample', 0) + improved.get('grp-sample', 0)} times; "
+          f"{improved.get('exact', 0)}, by large-neighbourhood search {improved.get('lns', 0)}, by "
+          f"justification {improved.get('justify', 0)} and by sampling {improved.get('sample', 0)} times; "
           f"{'proven optimal' if report.proven else 'not proven optimal'}; seed {args.seed}", file=sys.stderr)
     _print_quick_plans(policy, report, args.time_limit)
 

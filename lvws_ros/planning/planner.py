@@ -33,6 +33,7 @@ from lvws_ros.errors import ExpertError, PolicyError
 from lvws_ros.learning.policies import LVWSPolicy, OutOfTime, Until
 from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE, RoundCost, sample_schedules
 from lvws_ros.planning.follow import repair
+from lvws_ros.planning.justify import justify, reversed_rest
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 EXACT_TASKS = 60  # CP-SAT on the whole rest while at most this many tasks are left to do
@@ -47,9 +48,14 @@ PATIENCE_LARGE = 40  # the same for a rest too large for CP-SAT's whole model
 TEMPERATURE_TASKS = 20  # sampling_temperature: the default temperature up to this many tasks to do
 AHEAD_NOISE = 0.5  # "departure": "each": noise on the list schedules' keys, in mean task durations (not tuned)
 AHEAD_SAMPLES = 20  # list schedules of one such round when rounds are counted
-GRP_NOISE = 0.5  # randomized GRP rounds: noise on the critical-path keys, in mean task durations (not tuned)
-GRP_SAMPLES = 4  # randomized GRP schedules of one round when rounds are counted
-GRP_ROUND = 3  # offline, a round of randomized GRP has time for this many where one takes longer than a slice
+# the justification walk (a rest too large for CP-SAT's whole model, two rounds of every
+# SAMPLE_EVERY): noise on both passes' keys, in mean task durations, one drawn per pass; the walk
+# goes on from a pass at most JUSTIFY_SLACK longer than the plan, else from the plan (chosen on
+# warehouse instances 10 and 11, 200 x 1000, never on those the results are measured on)
+JUSTIFY_NOISES = (0.5, 1.0, 2.0)
+JUSTIFY_SLACK = 0.05
+JUSTIFY_PASSES = 2  # passes of one walk round when rounds are counted
+GRP_ROUND = 3  # offline, a round of GRP runs has time for this many where one takes longer than a slice
 PROBE_DECISIONS = 3  # decision steps of a quick plan timed to estimate what it costs on the cell
 PROBE_SECONDS = 0.5  # a probe stops after this long even with fewer decision steps
 # a cell's first plan: once a probed quick plan projects a whole plan within this many seconds,
@@ -151,6 +157,8 @@ class Planner:
         self.lns_rounds = 0  # LNS rounds from the plan's state
         self.unimproved = 0  # improvement rounds in a row that did not shorten the plan
         self.lns_window: int | None = None  # the neighbourhood size LNS adapted to last (None: its default)
+        self.justified: Plan | None = None  # the plan justification last started from (one pass each)
+        self.walk: tuple[State, Schedule] | None = None  # where the justification walk stands, from which state
         self._pooled: bool | None = None  # the cell's whole model is the pool model (None: not asked yet)
         self.clock = Clock.DEADLINE
         self.bound = self.base_bound = 0.0  # the plan's lower bound; the cell's (lower_bounds)
@@ -387,10 +395,12 @@ class Planner:
         end = time.perf_counter() + self.slice if deadline is None else min(deadline, time.perf_counter() + self.slice)
         if state.instance.departure == "each" and self.rounds % SAMPLE_EVERY == 1:
             shorter = self._sample_ahead(state, end)
+        elif self.justified is not self.plan and not self._whole(todo):
+            shorter = self._justify(state, self._grp_round_end(end, deadline))
         elif self.learned and self.rounds % SAMPLE_EVERY == 0 and (self.counted or self.lvws_seconds < self.slice):
             shorter = self._sample(state, todo, end)
-        elif self.rounds % SAMPLE_EVERY == 0 and not self._whole(todo):
-            shorter = self._sample_grp(state, self._grp_round_end(end, deadline))
+        elif self.rounds % SAMPLE_EVERY != SAMPLE_EVERY - 1 and not self._whole(todo):
+            shorter = self._walk(state, self._grp_round_end(end, deadline))
         elif self._whole(todo) and self.exact in (ExactState.OPEN, ExactState.SHORTENING) \
                 and (self.exact_rounds <= self.lns_rounds or self.exact is ExactState.SHORTENING):
             shorter = self._exact(state, end, deadline)
@@ -508,33 +518,62 @@ class Planner:
         one = self.quick.get("grp-critical-path", (0.0, 0.0))[1]
         return max(end, min(deadline, time.perf_counter() + GRP_ROUND * one))
 
-    def _sample_grp(self, state: State, end: float) -> bool:
-        """A round of randomized GRP list schedules (critical-path keys with GRP_NOISE
-        noise, a new seed each) until ``end`` (GRP_SAMPLES when counted): the improver of a
-        rest too large for CP-SAT's whole model where LVWS's own run does not fit a slice;
-        the shortest offered."""
+    def _justify(self, state: State, end: float) -> bool:
+        """Justification (:mod:`~lvws_ros.planning.justify`) from the plan, pass after pass
+        while each shortens it, until ``end``: once per plan, the first round after a plan
+        too large for CP-SAT's whole model changed (a pass is two GRP runs)."""
         assert self.plan is not None
-        best: SimulationResult | None = None
-        made = 0
-        if not self.counted and self.quick.get("grp-critical-path", (0.0, 0.0))[1] > end - time.perf_counter():
-            return False  # one run does not fit in the round
-        while (time.perf_counter() < end) if not self.counted else made < GRP_SAMPLES:
-            policy = GreedyPayloadPolicy(seed=int(self.rng.integers(2**31)), priority="critical-path",
-                                         noise=GRP_NOISE)
-            made += 1
+        self.justified = self.plan
+        if not self._pass_fits(end):
+            return False
+        todo = state.tasks_to_do()
+        backward = reversed_rest(state.instance, todo)
+        shorter = False
+        while True:
             try:
-                res = simulate(state.instance, policy if self.counted else Until(policy, end), state=state)
+                res = justify(state, self.plan.schedule, backward, todo, math.inf if self.counted else end,
+                              seed=int(self.rng.integers(2**31)))
+            except (OutOfTime, PolicyError):
+                return shorter
+            if not self.offer(self._ahead(state, res), state, "justify"):
+                return shorter
+            self.improved["justify"] = self.improved.get("justify", 0) + 1
+            self.justified, shorter = self.plan, True
+
+    def _pass_fits(self, end: float) -> bool:
+        """Whether a justification pass (two GRP runs, as long as GRP's quick plan each)
+        fits before ``end``; always when rounds are counted."""
+        return self.counted or 2 * self.quick.get("grp-critical-path", (0.0, 0.0))[1] <= end - time.perf_counter()
+
+    def _walk(self, state: State, end: float) -> bool:
+        """A round of the justification walk: passes with noise (JUSTIFY_NOISES) from where
+        the walk stands, until ``end`` (JUSTIFY_PASSES when counted); the walk goes on from a
+        pass at most JUSTIFY_SLACK longer than the plan, else from the plan; a pass shorter
+        than the plan is offered. The improver of a rest too large for CP-SAT's whole model
+        (an iterated local search: a worse schedule may lead to a better one)."""
+        assert self.plan is not None
+        if not self._pass_fits(end):
+            return False
+        if self.walk is None or self.walk[0] is not state:
+            self.walk = (state, self.plan.schedule)
+        todo = state.tasks_to_do()
+        backward = reversed_rest(state.instance, todo)
+        shorter, made = False, 0
+        while (time.perf_counter() < end) if not self.counted else made < JUSTIFY_PASSES:
+            made += 1
+            at = self.walk[1]
+            try:
+                res = self._ahead(state, justify(state, at, backward, todo, math.inf if self.counted else end,
+                                                 float(self.rng.choice(JUSTIFY_NOISES)),
+                                                 int(self.rng.integers(2**31))))
             except (OutOfTime, PolicyError):
                 break
-            res = self._ahead(state, res)
-            if best is None or res.schedule.makespan < best.schedule.makespan:
-                best = res
-        if best is None or best.schedule.makespan >= self.plan.makespan - TOLERANCE:
-            return False
-        if self.offer(best, state, "grp-sample"):
-            self.improved["grp-sample"] = self.improved.get("grp-sample", 0) + 1
-            return True
-        return False
+            if self.offer(res, state, "justify"):
+                self.improved["justify"] = self.improved.get("justify", 0) + 1
+                shorter = True
+            near = res.schedule.makespan <= self.plan.makespan * (1 + JUSTIFY_SLACK)
+            self.walk = (state, res.schedule if near else self.plan.schedule)
+        return shorter
 
     def _sample(self, state: State, todo: int, end: float) -> bool:
         assert self.plan is not None

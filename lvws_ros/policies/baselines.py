@@ -152,19 +152,29 @@ PRIORITIES = ("index", "critical-path")  # the order in which GRP takes the read
 class GreedyPayloadPolicy(_SequentialPolicy):
     name = "grp"
 
-    def __init__(self, seed: int = 0, priority: str = "index", noise: float = 0.0) -> None:
+    def __init__(self, seed: int = 0, priority: str = "index", noise: float = 0.0,
+                 keys: npt.ArrayLike | None = None) -> None:
         if priority not in PRIORITIES:
             raise PolicyError(f"grp: unknown priority {priority!r}; one of {', '.join(PRIORITIES)}")
         if not noise >= 0:
             raise PolicyError(f"grp: the noise must be >= 0, got {noise}")
         super().__init__(seed)
         self.priority, self.noise = priority, noise
+        self.keys = None if keys is None else np.asarray(keys, dtype=np.float64)  # (M,) given priorities
         self._ways_home: tuple[Instance | None, FloatArray | None] = (None, None)
 
     def order(self, inst: Instance, ready: list[int]) -> list[int]:
         """The ready tasks in the priority's order; with ``noise``, the critical-path keys
         each perturbed by Gaussian noise of ``noise`` mean task durations (randomized list
-        schedules, drawn from the policy's seeded generator)."""
+        schedules, drawn from the policy's seeded generator). With ``keys`` (one per task,
+        a list schedule's priorities, e.g. the starts of a schedule justified backwards):
+        the smallest key first, the noise on them alike, whatever the priority."""
+        if self.keys is not None and ready:
+            given = self.keys[ready]
+            if self.noise > 0:
+                given = given + self.noise * float(inst.durations.mean()) * self.rng.standard_normal(len(ready))
+            tasks = np.array(ready)
+            return tasks[np.lexsort((tasks, given))].tolist()  # ties: lower index
         if self.priority == "index" or not ready:
             return ready
         keys = inst.critical_tail[ready]
