@@ -13,6 +13,7 @@ and time.
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 import time
@@ -95,7 +96,7 @@ def print_table(runs: list[dict[str, Any]]) -> None:
             return f"{q[name]['makespan']:g} ({q[name]['seconds']:.1f})" if name in q else "not within the limit"
 
         best_quick = min(v["makespan"] for v in q.values())
-        marks = " | ".join(f"{best_by(r, t):g}" for t in MARKS)
+        marks = " | ".join("none yet" if math.isnan(b := best_by(r, t)) else f"{b:g}" for t in MARKS)
         held = " (held out)" if r["family"] in HELD_OUT else ""
         print(f"| {r['family']}{held} | {r['n']} x {r['m']} | {cell('grp')} | {cell('grp-critical-path')} | "
               f"{cell('lvws')} | {marks} | {r['makespan'] / best_quick:.3f} | {r['bound']:g} | "
