@@ -48,14 +48,12 @@ def reversed_rest(inst: Instance, todo: list[int]) -> Instance:
     return dataclasses.replace(inst, name=f"{inst.name} reversed", tasks=tasks, travel=travel)
 
 
-def _times(inst: Instance, schedule: Schedule) -> tuple[FloatArray, FloatArray]:
-    """(M,) starts and ends of ``schedule``'s tasks, indexed like ``inst.tasks`` (nan: not
-    in it)."""
-    start, end = np.full(inst.num_tasks, np.nan), np.full(inst.num_tasks, np.nan)
+def _ends(inst: Instance, schedule: Schedule) -> FloatArray:
+    """(M,) the ends of ``schedule``'s tasks, indexed like ``inst.tasks`` (nan: not in it)."""
+    end = np.full(inst.num_tasks, np.nan)
     for a in schedule.assignments:
-        j = inst.task_index[a.task]
-        start[j], end[j] = a.start, a.end
-    return start, end
+        end[inst.task_index[a.task]] = a.end
+    return end
 
 
 def justify(state: State, schedule: Schedule, backward: Instance, todo: list[int], deadline: float,
@@ -65,11 +63,9 @@ def justify(state: State, schedule: Schedule, backward: Instance, todo: list[int
     with the mirrored backward starts first (``noise``: in mean task durations, on both
     passes' keys). OutOfTime when a pass would run past ``deadline`` (perf_counter)."""
     inst = state.instance
-    _, end = _times(inst, schedule)
-    keys = -end[todo]  # the latest end first (nan, a task not in the plan, sorts last)
+    keys = -_ends(inst, schedule)[todo]  # the latest end first (nan, a task not in the plan, sorts last)
     back = simulate(backward, Until(GreedyPayloadPolicy(seed=seed, keys=keys, noise=noise), deadline)).schedule
-    _, back_end = _times(backward, back)
     forward = np.full(inst.num_tasks, np.inf)
-    forward[todo] = back.makespan - back_end  # the mirrored start: when the task starts, run forwards
+    forward[todo] = back.makespan - _ends(backward, back)  # the mirrored start: when the task starts, run forwards
     policy = GreedyPayloadPolicy(seed=seed + 1, keys=forward, noise=noise)
     return simulate(inst, Until(policy, deadline), state=state)

@@ -159,6 +159,7 @@ class Planner:
         self.lns_window: int | None = None  # the neighbourhood size LNS adapted to last (None: its default)
         self.justified: Plan | None = None  # the plan justification last started from (one pass each)
         self.walk: tuple[State, Schedule] | None = None  # where the justification walk stands, from which state
+        self._reversed: tuple[State, list[int], Instance] | None = None  # the rest turned around, of which state
         self._pooled: bool | None = None  # the cell's whole model is the pool model (None: not asked yet)
         self.clock = Clock.DEADLINE
         self.bound = self.base_bound = 0.0  # the plan's lower bound; the cell's (lower_bounds)
@@ -526,8 +527,7 @@ class Planner:
         self.justified = self.plan
         if not self._pass_fits(end):
             return False
-        todo = state.tasks_to_do()
-        backward = reversed_rest(state.instance, todo)
+        todo, backward = self._reversed_rest(state)
         shorter = False
         while True:
             try:
@@ -539,6 +539,13 @@ class Planner:
                 return shorter
             self.improved["justify"] = self.improved.get("justify", 0) + 1
             self.justified, shorter = self.plan, True
+
+    def _reversed_rest(self, state: State) -> tuple[list[int], Instance]:
+        """The tasks to do from ``state`` and their :func:`reversed_rest`, made once per state."""
+        if self._reversed is None or self._reversed[0] is not state:
+            todo = state.tasks_to_do()
+            self._reversed = (state, todo, reversed_rest(state.instance, todo))
+        return self._reversed[1], self._reversed[2]
 
     def _pass_fits(self, end: float) -> bool:
         """Whether a justification pass (two GRP runs, as long as GRP's quick plan each)
@@ -556,8 +563,7 @@ class Planner:
             return False
         if self.walk is None or self.walk[0] is not state:
             self.walk = (state, self.plan.schedule)
-        todo = state.tasks_to_do()
-        backward = reversed_rest(state.instance, todo)
+        todo, backward = self._reversed_rest(state)
         shorter, made = False, 0
         while (time.perf_counter() < end) if not self.counted else made < JUSTIFY_PASSES:
             made += 1
