@@ -7,8 +7,12 @@ the site it is at to ``goal.site`` (the distance over its speed; a fixed robot, 
 speed, never leaves its site, and aborts a goal elsewhere), then works for
 ``planned_duration`` (times the ``--noise`` factor of the task, the cell simulator's rule:
 :func:`~lvws_ros.sim.instance_world.duration_factor`), and ends at ``goal.site_to`` (or
-``goal.site``). It does not wait for the rest of its subteam: on arrival it reports
-``working``. Feedback comes every 0.1 s of wall time: the phase, the progress over travel
+``goal.site``). Arrived before ``goal.planned_start`` (seconds of ROS time; 0: none), it
+waits there, reporting ``waiting``, and starts work at the planned start: the dispatcher plans
+the start for when the last member of the subteam can be there (each member sets out once it
+is free). A member later than planned does not hold the others back: each starts at the
+planned start or on arrival, whichever is later (the dispatcher counts the task from its last
+member's start). Feedback comes every 0.1 s of wall time: the phase, the progress over travel
 and work together, the site (empty while travelling) and the pose (interpolated between
 the sites' coordinates). A transport's work (``site_to`` elsewhere) moves the robot from
 ``site`` to ``site_to``, reported between sites. A goal stopped on the way (cancelled or
@@ -50,6 +54,7 @@ FAULT_AT = 0.5  # --abort and --crash strike at this share of the work
 CRASH_EXIT = 137  # the exit status of --crash: what a shell reports for a SIGKILLed process
 
 TRAVELLING = ExecuteTask.Feedback.PHASE_TRAVELLING
+WAITING = ExecuteTask.Feedback.PHASE_WAITING
 WORKING = ExecuteTask.Feedback.PHASE_WORKING
 
 Where = Callable[[float], tuple[str, tuple[float, float, float] | None]]  # share done -> site, pose
@@ -92,6 +97,10 @@ class FakeRobot(TaskServer):
         travel = self.instance.travel
         if travel is not None and target is not None:
             self.site, self.xy = target, travel.coordinates[target]
+        wait = (float(goal.planned_start) - super().now()) * self.options.rate  # robot seconds until the plan's start
+        if goal.planned_start > 0 and wait > 0:
+            here = self._way(target, goal.site)
+            self._phase(feedback, WAITING, wait, (share, share), lambda f: here(1.0))
         # a transport (site_to elsewhere) moves its subteam while it works
         self._phase(feedback, WORKING, work, (share, 1.0), self._way(end, goal.site_to or goal.site),
                     task=goal.task_id)

@@ -37,7 +37,7 @@ from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main, spin_once
 from lvws_ros.ros.state_publisher import StatePublisher
 
-__all__ = ["DispatcherNode", "free_by_answer", "main"]
+__all__ = ["DispatcherNode", "cell_clock", "free_by_answer", "main", "node_clock"]
 
 ACTION = "execute_task"  # each robot's server: <robot id>/execute_task
 WATCH_SECONDS = 0.25  # how often the robots' servers and silences are looked at
@@ -58,6 +58,16 @@ def free_by_answer(res: Any) -> bool:
     it is cancelling or refuses to cancel is still running: its result will say when."""
     return int(res.return_code) in (CancelGoal.Response.ERROR_UNKNOWN_GOAL_ID,
                                     CancelGoal.Response.ERROR_GOAL_TERMINATED)
+
+
+def cell_clock(seconds: float, epoch: float, rate: float) -> float:
+    """The cell's time at ``seconds`` of the node's clock: ``rate`` times faster since ``epoch``."""
+    return epoch + (seconds - epoch) * rate
+
+
+def node_clock(cell_seconds: float, epoch: float, rate: float) -> float:
+    """The node's clock when the cell's reads ``cell_seconds`` (:func:`cell_clock` undone)."""
+    return epoch + (cell_seconds - epoch) / rate
 
 
 def _param(node: Node, name: str, default: Any, text: str, low: float | None = None, read_only: bool = True) -> Any:
@@ -91,15 +101,18 @@ class DispatcherNode(Node):
         path = str(_param(self, "cell", cell, "the cell: an lvws-instance/1 file (robots, sites, speeds, tasks)"))
         self.robot_timeout = float(_param(self, "robot_timeout", 5.0, "wall seconds of silence (no feedback, "
                                           "or no server) after which a robot counts as lost", 0.1))
-        self.rejoin_after = float(_param(self, "rejoin_after", 5.0, "seconds a robot that rejected or aborted "
-                                         "a goal stays out of the team", 0.0))
-        self.state_period = float(_param(self, "state_period", 1.0, "seconds between two unchanged "
-                                         "TeamState/TaskGraph publications", 0.05))
+        self.rejoin_after = float(_param(self, "rejoin_after", 5.0, "seconds (of the node's clock) a robot that "
+                                         "rejected or aborted a goal stays out of the team", 0.0))
+        self.state_period = float(_param(self, "state_period", 1.0, "seconds (of the node's clock) between two "
+                                         "unchanged TeamState/TaskGraph publications", 0.05))
         self.frame_id = str(_param(self, "frame_id", "map", "frame of the robots' poses and the sites"))
         self.exit_when_done = bool(_param(self, "exit_when_done", False, "exit 0 once every task is done"))
         self.summary_path = str(_param(self, "summary", "", "where to write the JSON summary at exit"))
         self.expect_subs = int(_param(self, "expect_subscribers", 0, "publish the state once this many nodes "
                                       "subscribe to its team and task graph (the scheduler, a recorder), or after 20 s"))
+        self.rate = float(_param(self, "rate", 1.0, "the cell's seconds per second of the node's clock: robots whose "
+                                 "time runs faster (lvws fake-robots --rate R) need rate R", 1e-3))
+        self.clock_epoch: float | None = None  # where the cell's clock meets the node's: its first reading
         if not path:
             raise ConfigError("no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
         self.cell_path = path
@@ -136,8 +149,17 @@ class DispatcherNode(Node):
         self.get_logger().info(f"cell {path}: {len(self.servers)} robot(s), {len(self.cell.tasks)} task(s); "
                                f"goals to <robot>/{ACTION}, robot_timeout {self.robot_timeout:g} s")
 
-    def now(self) -> float:
+    def clock_seconds(self) -> float:
+        """Seconds on the node's clock (ROS time: wall, or simulated with ``use_sim_time``)."""
         return float(self.get_clock().now().nanoseconds) / 1e9
+
+    def now(self) -> float:
+        """Seconds on the cell's clock: the node's, ``rate`` times faster since the node
+        started. Every stamp the dispatcher publishes and every time it keeps is on it."""
+        seconds = self.clock_seconds()
+        if self.clock_epoch is None and seconds > 0:  # a simulated clock reads 0 until its first message
+            self.clock_epoch = seconds
+        return seconds if self.clock_epoch is None else cell_clock(seconds, self.clock_epoch, self.rate)
 
     def snapshots(self) -> tuple[TeamSnapshot, GraphSnapshot]:
         """The team and task graph now, with one stamp."""
@@ -148,7 +170,7 @@ class DispatcherNode(Node):
     def publish_state(self) -> None:
         """TeamState and TaskGraph with one stamp (the team only once a robot is up)."""
         now = self.now()
-        self.last_published = now
+        self.last_published = self.clock_seconds()
         team = self.cell.team_snapshot(now)
         if not self.audience():
             return
@@ -214,7 +236,9 @@ class DispatcherNode(Node):
         server = self.servers[spec.robot]
         goal = ExecuteTask.Goal(task_id=spec.task, subteam=list(spec.subteam), site=spec.site, site_to=spec.site_to,
                                 require_names=list(spec.require_names), requires=list(spec.requires),
-                                planned_start=spec.planned_start, planned_duration=spec.planned_duration)
+                                planned_start=spec.planned_start if self.clock_epoch is None
+                                else node_clock(spec.planned_start, self.clock_epoch, self.rate),
+                                planned_duration=spec.planned_duration)
         self.goal_of[spec.key] = spec.robot
         self.last_uuid[spec.robot] = _new_uuid()
         self.heard[spec.key] = time.monotonic()
@@ -283,7 +307,7 @@ class DispatcherNode(Node):
         for rid in self.back(now):
             out.add(self.cell.rejoin(rid))
         self.apply(out)
-        if now - self.last_published >= self.state_period:
+        if self.clock_seconds() - self.last_published >= self.state_period:
             self.publish_state()
 
     def endpoints(self, server: _Server) -> frozenset[bytes]:
@@ -325,7 +349,7 @@ class DispatcherNode(Node):
             server = self.servers[rid]
             if why == "fault" or server.up_since is None:
                 continue
-            if why == "down" or (why in ("rejected", "aborted") and now - since >= self.rejoin_after) or \
+            if why == "down" or (why in ("rejected", "aborted") and now - since >= self.rejoin_after * self.rate) or \
                     (why in ("lost", "canceled") and (server.seen_down or server.answered
                                                       or self.endpoints(server) - server.dead)):
                 out.append(rid)
@@ -373,7 +397,7 @@ class DispatcherNode(Node):
         graph = self.cell.graph_snapshot(self.now())
         ends = [t.end for t in graph.tasks if t.end is not None]
         starts = [t.start for t in graph.tasks if t.start is not None]
-        return {"cell": self.cell_path, "tasks": len(graph.tasks), "tasks_done": len(ends),
+        return {"cell": self.cell_path, "rate": self.rate, "tasks": len(graph.tasks), "tasks_done": len(ends),
                 "makespan": (max(ends) - min(starts)) if ends and starts else 0.0, **self.counts,
                 "failed_robots": sorted(self.cell.failed_robots()), "error": "",
                 "wall_seconds": time.monotonic() - self.started_wall}
@@ -381,7 +405,7 @@ class DispatcherNode(Node):
     def finish(self) -> None:
         self.finished = True
         summary = self.summary()
-        self.get_logger().info(f"all {summary['tasks']} tasks done: makespan {summary['makespan']:.2f} s")
+        self.get_logger().info(f"all {summary['tasks']} tasks done: makespan {summary['makespan']:.2f} s of the cell")
         if self.summary_path:
             Path(self.summary_path).parent.mkdir(parents=True, exist_ok=True)
             Path(self.summary_path).write_text(json.dumps(summary, indent=1))
@@ -403,7 +427,7 @@ def build_parser(prog: str = "dispatcher") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=(
         "The world of a cell of real robots: publishes TeamState and TaskGraph for the scheduler and carries out "
         "its assignments as ExecuteTask goals to <robot id>/execute_task. ROS parameters: cell, robot_timeout, "
-        "rejoin_after, state_period, frame_id, expect_subscribers, exit_when_done, summary, use_sim_time."))
+        "rejoin_after, state_period, frame_id, expect_subscribers, exit_when_done, summary, rate, use_sim_time."))
     p.add_argument("cell", nargs="?", default="", help="the cell (lvws-instance/1); or -p cell:=CELL.json")
     return p
 

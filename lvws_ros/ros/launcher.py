@@ -184,7 +184,7 @@ def _actions_commands(commands: dict[str, list[str]], cell: Path, rate: float, s
                           *(["--namespace", namespace] if namespace else [])]
     out["dispatcher"] = [sys.executable, "-m", "lvws_ros.ros.dispatcher_node", str(cell), "--ros-args", *ns,
                          "-p", "exit_when_done:=true", "-p", f"summary:={summary}",
-                         "-p", f"expect_subscribers:={audience}", *protocol]
+                         "-p", f"expect_subscribers:={audience}", "-p", f"rate:={float(rate)}", *protocol]
     return out
 
 

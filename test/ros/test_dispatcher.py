@@ -26,6 +26,7 @@ import rclpy
 from lvws_msgs.msg import Assignment, AssignmentArray, GoalEvent, Task, TaskGraph
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from lvws_ros.ros.convert import from_time
 from lvws_ros.ros.service_call import call, ready
 from lvws_ros.ros.topics import (
     ASSIGNMENTS_QOS,
@@ -152,7 +153,8 @@ def cell(ros_context: Any, tmp_path: Path, name: str, robots: dict[str, Sequence
         c.procs["scheduler"] = _start([sys.executable, "-m", "lvws_ros.ros.scheduler_node", "--ros-args",
                                        "-p", f"policy:={policy}", *sim])
         c.procs["dispatcher"] = _start([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path), "--ros-args",
-                                        "-p", f"robot_timeout:={timeout}", "-p", "rejoin_after:=2.0", *sim])
+                                        "-p", f"robot_timeout:={timeout}", "-p", "rejoin_after:=2.0",
+                                        "-p", f"rate:={RATE}", *sim])
         assert c.spin(30, lambda: node.count_publishers(GOAL_EVENTS_TOPIC) > 0)  # no goal event goes unseen
         for pname, args in (robots or {"robots": [",".join(r["id"] for r in CELL["robots"])]}).items():
             c.procs[pname] = c.robots(*args, *(["--use-sim-time"] if sim_time else []))
@@ -189,6 +191,12 @@ def test_six_robots_with_subteams_travel_and_precedence_complete_and_the_bag_che
     assert teams["t6"] >= {"s1"} and len(teams["t6"]) > 1 and len(teams["t1"]) > 1  # subteams ran
     assert not c.of(GoalEvent.KIND_ABORTED) and not c.of(GoalEvent.KIND_LOST)
     assert len(c.of(GoalEvent.KIND_SENT)) == sum(len(r) for r in teams.values())
+    # the first member there waits for the planned start, reported as such
+    assert any(e.phase == "waiting" for e in c.of(GoalEvent.KIND_FEEDBACK))
+    # the task graph is on the cell's clock (rate 5): each task spans its duration in the cell's seconds
+    for t in c.graphs[-1].tasks:
+        span = from_time(t.end_time) - from_time(t.start_time)
+        assert 0.95 * t.duration <= span <= t.duration + 2.0 * RATE, (t.id, span, t.duration)
     text = executed_is_valid(bag, tmp_path)
     assert "valid by formats.md: yes" in text and "goals per robot" in text
     report = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "report", str(bag)], capture_output=True, text=True)
@@ -411,6 +419,18 @@ def test_bad_cell_file_exits_2_naming_the_unknown_trait(tmp_path):
 
 
 
+def _longest_chain(tasks: list[dict[str, Any]]) -> float:
+    """The longest chain of durations through the tasks' precedences (no travel)."""
+    by_id = {t["id"]: t for t in tasks}
+    ends: dict[str, float] = {}
+
+    def end(tid: str) -> float:
+        if tid not in ends:
+            ends[tid] = by_id[tid]["duration"] + max((end(p) for p in by_id[tid]["after"]), default=0.0)
+        return ends[tid]
+    return max(end(t["id"]) for t in tasks)
+
+
 def test_lvws_launch_with_action_robots_speaking_changes_runs_the_cell_and_its_bag_holds_the_goal_events(tmp_path):
     from lvws_ros.cli.report import report
     from lvws_ros.ros.launcher import launch
@@ -421,6 +441,8 @@ def test_lvws_launch_with_action_robots_speaking_changes_runs_the_cell_and_its_b
                  out_dir=tmp_path / "out", name="actions", gif=False, timeout=120.0, protocol="changes",
                  retire_after=0.0, log=lambda _t: None)
     assert res.summary["tasks_done"] == len(CELL["tasks"]) and res.summary["failures"] == 0
+    # the summary speaks the cell's seconds (rate 10), never shorter than the cell allows
+    assert res.summary["rate"] == 10.0 and res.summary["makespan"] >= _longest_chain(CELL["tasks"])
     rep = report(res.bag)
     assert rep.complete and not rep.problems
     assert rep.topics.get("/lvws/changes", 0) > 3 and len(rep.instance.tasks) == len(CELL["tasks"])
