@@ -24,7 +24,9 @@ duration is in the robot's own, faster, seconds (the cell's).
 Scripted faults: ``--abort ROBOT:TASK`` aborts that robot's first goal of that task
 halfway through the work with a message (a later goal of the same task succeeds);
 ``--crash ROBOT:TASK`` ends the whole process there and then (``os._exit``, as a SIGKILL
-would: no result, no goodbye).
+would: no result, no goodbye). With ``ROBOT:TASK:travelling`` either strikes halfway
+along the way to the task's site instead (never when the robot is there already): the
+rest of its subteam may be waiting at the site.
 """
 
 from __future__ import annotations
@@ -93,7 +95,8 @@ class FakeRobot(TaskServer):
         share = way / (way + work) if way + work > 0 else 0.0
         if way > 0:
             way_there = self._way(target, goal.site)
-            self._phase(feedback, TRAVELLING, way, (0.0, share), lambda f: ("", way_there(f)[1]))  # no site until working
+            self._phase(feedback, TRAVELLING, way, (0.0, share), lambda f: ("", way_there(f)[1]),  # no site until working
+                        task=goal.task_id)
         travel = self.instance.travel
         if travel is not None and target is not None:
             self.site, self.xy = target, travel.coordinates[target]
@@ -152,27 +155,28 @@ class FakeRobot(TaskServer):
     def _phase(self, feedback: TaskFeedback, phase: str, seconds: float, progress: tuple[float, float],
                where: Where, task: str | None = None) -> None:
         """Report ``phase`` every FEEDBACK_SECONDS until ``seconds`` of robot time went by;
-        while working (``task`` given), strike the scripted fault halfway."""
+        with ``task`` given, strike the scripted fault of this phase halfway."""
         start, rate = self.now(), self.options.rate
         while True:
             done = min((self.now() - start) / seconds, 1.0) if seconds > 0 else 1.0
             site, pose = where(done)
             feedback.send(phase, progress[0] + (progress[1] - progress[0]) * done, site, pose)
             if task is not None and done >= FAULT_AT:
-                self._fault(task, done)
+                self._fault(task, phase, done)
             if done >= 1.0:
                 return
             feedback.sleep(min(FEEDBACK_SECONDS, (1.0 - done) * seconds / rate))
 
-    def _fault(self, task: str, done: float) -> None:
-        if (self.robot_id, task) in self.options.crashes:
-            sys.stderr.write(f"fake robot {self.robot_id}: crashing during task {task!r} (--crash): "
+    def _fault(self, task: str, phase: str, done: float) -> None:
+        if (self.robot_id, task, phase) in self.options.crashes:
+            sys.stderr.write(f"fake robot {self.robot_id}: crashing during task {task!r}, {phase} (--crash): "
                              "the process exits now\n")
             sys.stderr.flush()
             os._exit(CRASH_EXIT)
-        if (self.robot_id, task) in self.options.aborts and task not in self.aborted:
+        if (self.robot_id, task, phase) in self.options.aborts and task not in self.aborted:
             self.aborted.add(task)
-            raise TaskFailed(f"{self.robot_id} aborts task {task!r} at {100 * done:.0f} % of its work "
+            part = "its work" if phase == WORKING else "its way to the site"
+            raise TaskFailed(f"{self.robot_id} aborts task {task!r} at {100 * done:.0f} % of {part} "
                              "(a scripted fault: --abort)")
 
 

@@ -22,13 +22,15 @@ class FakeOptions:
     """How the fake robots behave: ``rate`` (their time runs ``rate`` times faster than
     the node's clock), the duration noise (each task's work takes its planned duration x
     a factor in [1 - noise, 1 + noise] drawn from the seed and the task's id) and the
-    scripted faults, (robot, task) pairs: an abort mid-work, a crash of the process."""
+    scripted faults, (robot, task, phase) triples: an abort, a crash of the process, halfway
+    through the work (phase ``working``) or through the way to the task's site
+    (``travelling``)."""
 
     rate: float = 1.0
     noise: float = 0.0
     noise_seed: int = 0
-    aborts: frozenset[tuple[str, str]] = frozenset()
-    crashes: frozenset[tuple[str, str]] = frozenset()
+    aborts: frozenset[tuple[str, str, str]] = frozenset()
+    crashes: frozenset[tuple[str, str, str]] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -53,11 +55,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise", type=float, default=0.0,
                    help="each task's work takes its planned duration x a factor in [1-NOISE, 1+NOISE] (default 0)")
     p.add_argument("--noise-seed", type=int, default=0, help="the noise's seed (the factor also depends on the task)")
-    p.add_argument("--abort", action="append", default=[], metavar="ROBOT:TASK",
-                   help="ROBOT aborts its first goal of TASK halfway through the work, with a message "
-                        "(repeatable)")
-    p.add_argument("--crash", action="append", default=[], metavar="ROBOT:TASK",
-                   help="the whole process exits at once when ROBOT is halfway through TASK, as if killed (repeatable)")
+    p.add_argument("--abort", action="append", default=[], metavar="ROBOT:TASK[:travelling]",
+                   help="ROBOT aborts its first goal of TASK halfway through the work (or, with :travelling, "
+                        "halfway to the task's site), with a message (repeatable)")
+    p.add_argument("--crash", action="append", default=[], metavar="ROBOT:TASK[:travelling]",
+                   help="the whole process exits at once when ROBOT is halfway through TASK's work (or, with "
+                        ":travelling, halfway to its site), as if killed (repeatable)")
     p.add_argument("--use-sim-time", action="store_true", help="follow the simulated clock (/clock) instead of wall time")
     p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], dest="ros_args", metavar="ARG",
                    help="ROS arguments to the end of the line (e.g. -r __ns:=/cellA)")
@@ -88,17 +91,22 @@ def fake_cell(args: argparse.Namespace) -> FakeCell:
     return FakeCell(path, inst, robots, options, args.namespace, bool(args.use_sim_time))
 
 
-def _faults(path: Path, inst: Instance, option: str, given: list[str]) -> frozenset[tuple[str, str]]:
-    pairs = set()
+FAULT_PHASES = ("working", "travelling")  # where a scripted fault strikes: halfway through which
+
+
+def _faults(path: Path, inst: Instance, option: str, given: list[str]) -> frozenset[tuple[str, str, str]]:
+    triples = set()
     for item in given:
         robot, sep, task = item.partition(":")
+        head, colon, phase = task.rpartition(":")
+        task, phase = (head, phase) if colon and phase in FAULT_PHASES else (task, FAULT_PHASES[0])
         if not sep or not robot or not task:
-            raise ConfigError(f"{option} {item!r}: expected ROBOT:TASK")
+            raise ConfigError(f"{option} {item!r}: expected ROBOT:TASK or ROBOT:TASK:travelling")
         if robot not in inst.robot_index:
             raise ConfigError(f"{path}: {option} {item!r}: unknown robot {robot!r} "
                               f"(the cell's robots: {_few(inst.robot_index)})")
-        pairs.add((robot, task))  # a task the file lacks may still be submitted at run time
-    return frozenset(pairs)
+        triples.add((robot, task, phase))  # a task the file lacks may still be submitted at run time
+    return frozenset(triples)
 
 
 def _few(names: dict[str, int] | list[str], most: int = 10) -> str:

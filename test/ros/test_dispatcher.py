@@ -264,6 +264,45 @@ def test_a_robot_killed_mid_task_is_lost_in_time_its_task_replanned_and_it_is_us
     never_double_booked(c)
 
 
+# a waits at t1's site from the start; b drives 40 s (8 s of wall time at RATE) to join it there: a failure
+# halfway (4 s) is known to the dispatcher well before the planned start, even a lost robot's (TIMEOUT)
+PAIR = {
+    "format": "lvws-instance/1", "name": "pair", "capabilities": ["hold", "fix"], "departure": "each",
+    "sites": {"x": [0, 0], "far": [40, 0]},
+    "robots": [{"id": "a", "capabilities": [1, 0], "payload": 1, "site": "x", "speed": 1.0},
+               {"id": "b", "capabilities": [0, 1], "payload": 1, "site": "far", "speed": 1.0}],
+    "tasks": [{"id": "t1", "capabilities": [1, 1], "payload": 0, "duration": 2, "after": [], "site": "x"},
+              {"id": "t2", "capabilities": [1, 0], "payload": 0, "duration": 1, "after": ["t1"], "site": "x"}],
+}
+
+
+@pytest.mark.parametrize("fault", ["abort", "crash"])
+def test_a_member_that_fails_on_its_way_while_the_other_waits_at_the_site_releases_it_and_the_task_runs_again(
+        ros_context, tmp_path, fault):
+    """Departing each: ``a`` is at the task's site and waits for the planned start while
+    ``b`` is on its way; ``b`` aborts halfway (or its process dies there). The waiting
+    member is released (its goal cancelled), the task goes back to the scheduler, and it
+    runs again with ``b`` back: done, valid, nobody booked twice."""
+    bag = tmp_path / "bag"
+    robots = {"robots": ["a,b", "--abort", "b:t1:travelling"]} if fault == "abort" else \
+        {"a": ["a"], "b": ["b", "--crash", "b:t1:travelling"]}
+    with cell(ros_context, tmp_path, f"lvws_dispatch_wait_{fault}", bag=bag, data=PAIR, robots=robots,
+              timeout=TIMEOUT if fault == "crash" else CALM) as c:
+        failed = GoalEvent.KIND_ABORTED if fault == "abort" else GoalEvent.KIND_LOST
+        assert c.spin(60, lambda: bool(c.of(failed, "b"))), c.output("dispatcher")
+        if fault == "crash":
+            c.procs["b again"] = c.robots("b")
+        assert c.spin(60, c.done), c.output("dispatcher")
+        c.spin(1.0, lambda: False)
+    first = c.events.index(c.of(failed, "b")[0])
+    waited = [e for e in c.events[:first] if e.robot_id == "a" and e.task_id == "t1" and e.phase == "waiting"]
+    assert waited, "a was not waiting at the site when b failed"
+    assert [e for e in c.events[first:] if e.kind == GoalEvent.KIND_CANCELED and e.robot_id == "a"], "a kept waiting"
+    assert {e.robot_id for e in c.of(GoalEvent.KIND_SUCCEEDED) if e.task_id == "t1"} == {"a", "b"}
+    never_double_booked(c)
+    assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
+
+
 def test_a_cancel_answer_frees_a_lost_robot_only_when_its_goal_is_unknown_or_over():
     from action_msgs.srv import CancelGoal
 
