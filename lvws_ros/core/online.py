@@ -130,6 +130,7 @@ class OnlineDecision:
     graph_stamp: float
     policy: str = ""
     state_latency: float = 0.0  # wall seconds from the arrival of the state that made it due to its publication
+    published: float = 0.0  # its stamp: when it went out on the node's clock, never before its inputs (0: unknown)
 
 
 def _finite(value: float, where: str, low: float = 0.0, high: float = MAX_VALUE) -> None:
@@ -537,8 +538,9 @@ def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: G
 def sent_at(decision: OnlineDecision, now: float) -> float:
     """When a decision made on the snapshots of time ``now`` went out: ``now`` plus the time
     it took (its ``latency``: a first plan awaited can take longer than ``ack_timeout``, and
-    the world cannot take what it has not been sent)."""
-    return now + decision.latency
+    the world cannot take what it has not been sent), or its ``published`` stamp when later
+    (a world whose clock runs faster than the wall's, which the node follows)."""
+    return max(now + decision.latency, decision.published)
 
 
 def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:
@@ -764,6 +766,15 @@ class OnlineScheduler:
         self._seen_free = free - {r for _, team in decision.assignments for r in team}
         self._seen_ready = ready - {t for t, _ in decision.assignments}
         return decision
+
+    def published(self, decision: OnlineDecision) -> None:
+        """The decision went out (its ``published`` stamp set): its assignments are pending
+        from :func:`sent_at` on."""
+        now = max(decision.team_stamp, decision.graph_stamp)
+        for task, _robots in decision.assignments:
+            if task in self.pending:
+                robots, since = self.pending[task]
+                self.pending[task] = (robots, max(since, sent_at(decision, now)))
 
     def forget(self, decision: OnlineDecision) -> None:
         """Undo :meth:`decide`'s bookkeeping for a decision that was never sent: its tasks

@@ -328,7 +328,8 @@ def decision_from_msg(msg: Any) -> OnlineDecision:
     return OnlineDecision(int(msg.decision_step), tuple((a.task_id, tuple(a.robot_ids)) for a in msg.assignments),
                           tuple(msg.waiting_robot_ids), from_time(msg.decision_latency), from_time(msg.team_stamp),
                           from_time(msg.graph_stamp), msg.policy,
-                          from_time(msg.state_latency) if hasattr(msg, "state_latency") else 0.0)
+                          from_time(msg.state_latency) if hasattr(msg, "state_latency") else 0.0,
+                          from_time(msg.header.stamp))
 
 
 def diagnostics_from_msg(msg: Any) -> list[dict[str, str]]:

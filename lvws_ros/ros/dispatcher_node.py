@@ -27,6 +27,7 @@ from rclpy.action import ActionClient
 from rclpy.client import Client
 from rclpy.node import Node
 from rclpy.task import Future
+from rosgraph_msgs.msg import Clock
 from unique_identifier_msgs.msg import UUID
 
 from lvws_ros.core.dispatch import Dispatch, GoalKind, GoalSpec, Outcome
@@ -40,6 +41,7 @@ from lvws_ros.ros.state_publisher import StatePublisher
 __all__ = ["DispatcherNode", "cell_clock", "free_by_answer", "main", "node_clock"]
 
 ACTION = "execute_task"  # each robot's server: <robot id>/execute_task
+CLOCK_SECONDS = 0.01  # publish_clock: the cell's clock on /clock this often (seconds of the node's clock)
 WATCH_SECONDS = 0.25  # how often the robots' servers and silences are looked at
 PROGRESS_SECONDS = 2.0
 WAIT_FOR_SUBSCRIBERS = 20.0  # wall seconds the first state waits for expect_subscribers
@@ -113,6 +115,10 @@ class DispatcherNode(Node):
         self.rate = float(_param(self, "rate", 1.0, "the cell's seconds per second of the node's clock: robots whose "
                                  "time runs faster (lvws fake-robots --rate R) need rate R", 1e-3))
         self.clock_epoch: float | None = None  # where the cell's clock meets the node's: its first reading
+        if bool(_param(self, "publish_clock", False, "publish the cell's clock on clock (rosgraph_msgs/Clock, "
+                       "100 times a wall second) for the nodes of a cell at rate != 1 to follow (use_sim_time)")):
+            clock_pub = self.create_publisher(Clock, topics.CLOCK_TOPIC, topics.CLOCK_QOS)
+            self.create_timer(CLOCK_SECONDS, lambda: clock_pub.publish(Clock(clock=convert.to_time(self.now()))))
         if not path:
             raise ConfigError("no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
         self.cell_path = path
@@ -427,7 +433,8 @@ def build_parser(prog: str = "dispatcher") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=(
         "The world of a cell of real robots: publishes TeamState and TaskGraph for the scheduler and carries out "
         "its assignments as ExecuteTask goals to <robot id>/execute_task. ROS parameters: cell, robot_timeout, "
-        "rejoin_after, state_period, frame_id, expect_subscribers, exit_when_done, summary, rate, use_sim_time."))
+        "rejoin_after, state_period, frame_id, expect_subscribers, exit_when_done, summary, rate, publish_clock, "
+        "use_sim_time."))
     p.add_argument("cell", nargs="?", default="", help="the cell (lvws-instance/1); or -p cell:=CELL.json")
     return p
 

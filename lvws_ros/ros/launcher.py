@@ -170,12 +170,15 @@ def actions_cell(out: Path, config: str = "", instance: str = "") -> Path:
 def _actions_commands(commands: dict[str, list[str]], cell: Path, rate: float, summary: Path,
                       namespace: str, audience: int) -> dict[str, list[str]]:
     """``commands`` with the dispatcher and fake robots (``lvws fake-robots``) in place of
-    the simulator, every node on wall time (no simulator publishes a clock)."""
+    the simulator. At rate 1 every node is on wall time; at another rate the robots run that
+    much faster on wall time, and the dispatcher publishes the cell's clock, which the
+    scheduler and the recorder follow (use_sim_time)."""
     def wall(cmd: list[str]) -> list[str]:  # without "-p use_sim_time:=..."
         drop = {k for k, a in enumerate(cmd) if a.startswith("use_sim_time:=") and k and cmd[k - 1] == "-p"}
         return [a for k, a in enumerate(cmd) if k not in drop and k + 1 not in drop]
 
-    out = {name: wall(cmd) for name, cmd in commands.items() if name != "cell_sim"}
+    real_time = float(rate) == 1.0
+    out = {name: wall(cmd) if real_time else cmd for name, cmd in commands.items() if name != "cell_sim"}
     sim = commands["cell_sim"]  # the world's protocol, the same for the dispatcher
     protocol = [x for k, a in enumerate(sim) if k and sim[k - 1] == "-p"
                 and a.startswith(("protocol:=", "retire_after:=")) for x in ("-p", a)]
@@ -184,7 +187,8 @@ def _actions_commands(commands: dict[str, list[str]], cell: Path, rate: float, s
                           *(["--namespace", namespace] if namespace else [])]
     out["dispatcher"] = [sys.executable, "-m", "lvws_ros.ros.dispatcher_node", str(cell), "--ros-args", *ns,
                          "-p", "exit_when_done:=true", "-p", f"summary:={summary}",
-                         "-p", f"expect_subscribers:={audience}", "-p", f"rate:={float(rate)}", *protocol]
+                         "-p", f"expect_subscribers:={audience}", "-p", f"rate:={float(rate)}",
+                         "-p", f"publish_clock:={'false' if real_time else 'true'}", *protocol]
     return out
 
 

@@ -570,9 +570,10 @@ class SchedulerNode(LifecycleNode):
         self.last_latency, self.last_latency_step = decision.latency, decision.step + 1  # as "decisions" counts
         # never stamped before the inputs it answers (a sim clock may lag the state)
         stamp = max(self.get_clock().now().nanoseconds / 1e9, decision.team_stamp, decision.graph_stamp)
-        decision = replace(decision, state_latency=time.perf_counter() - self.step_started)
+        decision = replace(decision, state_latency=time.perf_counter() - self.step_started, published=stamp)
         self.last_state_latency = decision.state_latency
         self.pub.publish(convert.decision_to_msg(decision, convert.to_time(stamp)))
+        core.published(decision)
         made = ", ".join(f"{t}<-{'+'.join(r)}" for t, r in decision.assignments[:LOG_NAMES]) or "-"
         made += f" (+{len(decision.assignments) - LOG_NAMES} more)" if len(decision.assignments) > LOG_NAMES else ""
         waiting = ", ".join(decision.waiting[:LOG_NAMES]) or "-"

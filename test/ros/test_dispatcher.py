@@ -400,7 +400,8 @@ def test_on_sim_time_the_cell_runs_on_the_simulated_clock(ros_context, tmp_path)
         wall = time.monotonic() - began
     times = [(t.start_time.sec + t.start_time.nanosec * 1e-9, t.end_time.sec + t.end_time.nanosec * 1e-9)
              for t in c.graphs[-1].tasks]
-    assert all(100.0 <= a <= b <= 100.0 + 4.0 * (wall + 30.0) for a, b in times), times  # the clock's, not 1970's
+    # the cell's clock: the simulated one (4 x wall) at RATE from the dispatcher's first reading, not 1970's
+    assert all(100.0 <= a <= b <= 100.0 + 4.0 * RATE * (wall + 30.0) for a, b in times), times
     assert not c.of(GoalEvent.KIND_LOST)  # silence is counted in wall seconds: a fast clock loses no robot
 
 
@@ -529,15 +530,21 @@ def test_action_robots_departing_each_set_out_on_their_own_and_the_cell_complete
     """A coalition benchmark's cell (20 robots, 50 tasks, travel, the way home, departure
     each) through the dispatcher and fake robots: the node gives tasks to busy robots, the
     dispatcher sends each member its goal once it is free, and the bag shows members of one
-    subteam sent off at different times; every task done, none failed, the report valid."""
+    subteam sent off at different times; every task done, none failed, the report valid.
+    The first decision waits 1.5 wall seconds for the plan, 15 s of the cell's time at rate
+    10, three times the node's ack_timeout: the node follows the cell's clock (the
+    dispatcher's /clock), so it offers no task twice (none refused)."""
     from rosbags.highlevel import AnyReader
 
     from lvws_ros.cli.report import report
     from lvws_ros.ros.launcher import launch
 
     path = Path(__file__).resolve().parents[2] / "examples" / "dcmrta" / "env_0.json"
+    params = tmp_path / "params.yaml"
+    params.write_text("scheduler:\n  ros__parameters:\n    first_plan_wait: 1.5\n")
     res = launch(robots="actions", instance=str(path), policy="auto", rate=10.0, bag_dir=tmp_path / "bags",
-                 out_dir=tmp_path / "out", name="each", gif=False, timeout=240.0, log=lambda _t: None)
+                 out_dir=tmp_path / "out", name="each", gif=False, timeout=240.0, params_file=str(params),
+                 log=lambda _t: None)
     assert res.summary["tasks_done"] == 50 and res.summary["failures"] == 0 and res.summary["refused"] == 0
     rep = report(res.bag)
     assert rep.complete and not rep.problems
