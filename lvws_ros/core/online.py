@@ -535,12 +535,18 @@ def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: G
             and (robots is None or set(v[0]) <= robots)}
 
 
+PUBLISHED_WITHIN = 86_400.0  # a decision stamped further than this after its inputs' time is on another clock
+
+
 def sent_at(decision: OnlineDecision, now: float) -> float:
     """When a decision made on the snapshots of time ``now`` went out: ``now`` plus the time
     it took (its ``latency``: a first plan awaited can take longer than ``ack_timeout``, and
-    the world cannot take what it has not been sent), or its ``published`` stamp when later
-    (a world whose clock runs faster than the wall's, which the node follows)."""
-    return max(now + decision.latency, decision.published)
+    the world cannot take what it has not been sent), or its ``published`` stamp when later:
+    a node that follows a world's clock running faster than the wall's stamps it on that
+    clock. A stamp more than PUBLISHED_WITHIN after ``now`` is on a clock of its own (a node
+    on wall time beside a simulated world) and does not count."""
+    late = decision.published - now
+    return now + max(decision.latency, late if late <= PUBLISHED_WITHIN else 0.0)
 
 
 def snapshot_key(team: TeamSnapshot, graph: GraphSnapshot) -> tuple[Any, ...]:

@@ -52,7 +52,8 @@ from lvws_ros.sim.instance_world import duration_factor
 __all__ = ["CRASH_EXIT", "FakeRobot", "main", "run"]
 
 FEEDBACK_SECONDS = 0.1  # wall seconds between two feedback messages
-FAULT_AT = 0.5  # --abort and --crash strike at this share of the work
+FAULT_AT = 0.5  # --abort and --crash strike at this share of the work (or of the way)
+MAX_WAIT = 86_400.0  # robot seconds: a planned start further ahead is on another clock, and not waited for
 CRASH_EXIT = 137  # the exit status of --crash: what a shell reports for a SIGKILLed process
 
 TRAVELLING = ExecuteTask.Feedback.PHASE_TRAVELLING
@@ -69,7 +70,7 @@ class FakeRobot(TaskServer):
         super().__init__(robot_id, **server_args)
         self.instance = instance
         self.options = options or FakeOptions()
-        self.aborted: set[str] = set()  # the tasks whose scripted abort happened (each happens once)
+        self.aborted: set[tuple[str, str]] = set()  # the (task, phase) whose scripted abort happened (once each)
         k = instance.robot_index[robot_id]
         travel = instance.travel
         self.speed = travel.robot_speed[k] if travel is not None else 0.0
@@ -101,7 +102,11 @@ class FakeRobot(TaskServer):
         if travel is not None and target is not None:
             self.site, self.xy = target, travel.coordinates[target]
         wait = (float(goal.planned_start) - super().now()) * self.options.rate  # robot seconds until the plan's start
-        if goal.planned_start > 0 and wait > 0:
+        if wait > MAX_WAIT:  # a planned start on another clock than this robot's
+            self.get_logger().warning(f"{self.robot_id}: task {goal.task_id!r} planned to start {wait:.0f} s from now: "
+                                      "the dispatcher's clock is not this robot's (--rate, --use-sim-time); "
+                                      "starting at once")
+        elif goal.planned_start > 0 and wait > 0:
             here = self._way(target, goal.site)
             self._phase(feedback, WAITING, wait, (share, share), lambda f: here(1.0))
         # a transport (site_to elsewhere) moves its subteam while it works
@@ -173,8 +178,8 @@ class FakeRobot(TaskServer):
                              "the process exits now\n")
             sys.stderr.flush()
             os._exit(CRASH_EXIT)
-        if (self.robot_id, task, phase) in self.options.aborts and task not in self.aborted:
-            self.aborted.add(task)
+        if (self.robot_id, task, phase) in self.options.aborts and (task, phase) not in self.aborted:
+            self.aborted.add((task, phase))
             part = "its work" if phase == WORKING else "its way to the site"
             raise TaskFailed(f"{self.robot_id} aborts task {task!r} at {100 * done:.0f} % of {part} "
                              "(a scripted fault: --abort)")

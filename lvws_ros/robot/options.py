@@ -99,6 +99,8 @@ def _faults(path: Path, inst: Instance, option: str, given: list[str]) -> frozen
     for item in given:
         robot, sep, task = item.partition(":")
         head, colon, phase = task.rpartition(":")
+        if colon and phase not in FAULT_PHASES and head in {t.id for t in inst.tasks}:
+            raise ConfigError(f"{path}: {option} {item!r}: unknown phase {phase!r} (one of {', '.join(FAULT_PHASES)})")
         task, phase = (head, phase) if colon and phase in FAULT_PHASES else (task, FAULT_PHASES[0])
         if not sep or not robot or not task:
             raise ConfigError(f"{option} {item!r}: expected ROBOT:TASK or ROBOT:TASK:travelling")

@@ -41,7 +41,8 @@ from lvws_ros.ros.state_publisher import StatePublisher
 __all__ = ["DispatcherNode", "cell_clock", "free_by_answer", "main", "node_clock"]
 
 ACTION = "execute_task"  # each robot's server: <robot id>/execute_task
-CLOCK_SECONDS = 0.01  # publish_clock: the cell's clock on /clock this often (seconds of the node's clock)
+CLOCK_SECONDS = 0.02  # publish_clock: the cell's clock on /clock this often (seconds of the node's clock)
+MAX_RATE = 1000.0  # the cell's clock starts at the node's (about 1.8e9 s): at this rate int32 stamps last 4 days
 WATCH_SECONDS = 0.25  # how often the robots' servers and silences are looked at
 PROGRESS_SECONDS = 2.0
 WAIT_FOR_SUBSCRIBERS = 20.0  # wall seconds the first state waits for expect_subscribers
@@ -72,10 +73,11 @@ def node_clock(cell_seconds: float, epoch: float, rate: float) -> float:
     return epoch + (cell_seconds - epoch) / rate
 
 
-def _param(node: Node, name: str, default: Any, text: str, low: float | None = None, read_only: bool = True) -> Any:
+def _param(node: Node, name: str, default: Any, text: str, low: float | None = None, high: float = 1e6,
+           read_only: bool = True) -> Any:
     d = ParameterDescriptor(description=text, read_only=read_only)
     if low is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=low, to_value=1e6, step=0.0)]
+        d.floating_point_range = [FloatingPointRange(from_value=low, to_value=high, step=0.0)]
     return node.declare_parameter(name, default, d).value
 
 
@@ -113,12 +115,9 @@ class DispatcherNode(Node):
         self.expect_subs = int(_param(self, "expect_subscribers", 0, "publish the state once this many nodes "
                                       "subscribe to its team and task graph (the scheduler, a recorder), or after 20 s"))
         self.rate = float(_param(self, "rate", 1.0, "the cell's seconds per second of the node's clock: robots whose "
-                                 "time runs faster (lvws fake-robots --rate R) need rate R", 1e-3))
+                                 "time runs faster (lvws fake-robots --rate R) need rate R", 1e-3, MAX_RATE))
         self.clock_epoch: float | None = None  # where the cell's clock meets the node's: its first reading
-        if bool(_param(self, "publish_clock", False, "publish the cell's clock on clock (rosgraph_msgs/Clock, "
-                       "100 times a wall second) for the nodes of a cell at rate != 1 to follow (use_sim_time)")):
-            clock_pub = self.create_publisher(Clock, topics.CLOCK_TOPIC, topics.CLOCK_QOS)
-            self.create_timer(CLOCK_SECONDS, lambda: clock_pub.publish(Clock(clock=convert.to_time(self.now()))))
+        self.clock_pub = self._clock_publisher()
         if not path:
             raise ConfigError("no cell given (-p cell:=CELL.json, or lvws dispatcher CELL.json)")
         self.cell_path = path
@@ -155,6 +154,28 @@ class DispatcherNode(Node):
         self.get_logger().info(f"cell {path}: {len(self.servers)} robot(s), {len(self.cell.tasks)} task(s); "
                                f"goals to <robot>/{ACTION}, robot_timeout {self.robot_timeout:g} s")
 
+    def _clock_publisher(self) -> Any:
+        """The publisher of the cell's clock (``publish_clock``; None: not asked for), every
+        CLOCK_SECONDS of the node's clock. A node on that clock itself would feed on it."""
+        if not bool(_param(self, "publish_clock", False, "publish the cell's clock on clock (rosgraph_msgs/Clock, "
+                           "50 times a second of the node's clock) for the scheduler and a recorder to follow "
+                           "(use_sim_time) when rate is not 1")):
+            return None
+        if bool(self.get_parameter("use_sim_time").value):
+            raise ConfigError("publish_clock with use_sim_time: the dispatcher would follow the clock it publishes "
+                              "(publish the cell's clock from a dispatcher on wall time)")
+        pub = self.create_publisher(Clock, topics.CLOCK_TOPIC, topics.CLOCK_QOS)
+        self.create_timer(CLOCK_SECONDS, self.publish_clock)
+        return pub
+
+    def publish_clock(self) -> None:
+        if self.clock_pub is not None:
+            self.clock_pub.publish(Clock(clock=convert.to_time(self.now())))
+
+    def to_node_clock(self, cell_seconds: float) -> float:
+        """The node's clock when the cell's reads ``cell_seconds`` (as is before the first reading)."""
+        return cell_seconds if self.clock_epoch is None else node_clock(cell_seconds, self.clock_epoch, self.rate)
+
     def clock_seconds(self) -> float:
         """Seconds on the node's clock (ROS time: wall, or simulated with ``use_sim_time``)."""
         return float(self.get_clock().now().nanoseconds) / 1e9
@@ -177,6 +198,7 @@ class DispatcherNode(Node):
         """TeamState and TaskGraph with one stamp (the team only once a robot is up)."""
         now = self.now()
         self.last_published = self.clock_seconds()
+        self.publish_clock()  # a node on the cell's clock never gets a state from its future
         team = self.cell.team_snapshot(now)
         if not self.audience():
             return
@@ -221,7 +243,7 @@ class DispatcherNode(Node):
         status = DiagnosticStatus(level=DiagnosticStatus.WARN, name="lvws_dispatcher", message=text,
                                   hardware_id=self.get_fully_qualified_name())
         msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = convert.to_time(self.now())
         self.diag_pub.publish(msg)
 
     # -- assignments and goals -----------------------------------------------------------
@@ -242,8 +264,7 @@ class DispatcherNode(Node):
         server = self.servers[spec.robot]
         goal = ExecuteTask.Goal(task_id=spec.task, subteam=list(spec.subteam), site=spec.site, site_to=spec.site_to,
                                 require_names=list(spec.require_names), requires=list(spec.requires),
-                                planned_start=spec.planned_start if self.clock_epoch is None
-                                else node_clock(spec.planned_start, self.clock_epoch, self.rate),
+                                planned_start=self.to_node_clock(spec.planned_start),
                                 planned_duration=spec.planned_duration)
         self.goal_of[spec.key] = spec.robot
         self.last_uuid[spec.robot] = _new_uuid()

@@ -179,6 +179,10 @@ def _actions_commands(commands: dict[str, list[str]], cell: Path, rate: float, s
 
     real_time = float(rate) == 1.0
     out = {name: wall(cmd) if real_time else cmd for name, cmd in commands.items() if name != "cell_sim"}
+    if not real_time and not any(a.startswith("ack_timeout:=") for a in out["scheduler"]):
+        from lvws_ros.ros.scheduler_node import PARAMETERS  # the wall seconds of the default, on the cell's clock
+
+        out["scheduler"] += ["-p", f"ack_timeout:={float(PARAMETERS['ack_timeout'].default) * float(rate)}"]
     sim = commands["cell_sim"]  # the world's protocol, the same for the dispatcher
     protocol = [x for k, a in enumerate(sim) if k and sim[k - 1] == "-p"
                 and a.startswith(("protocol:=", "retire_after:=")) for x in ("-p", a)]

@@ -115,9 +115,9 @@ PARAMETERS: dict[str, Param] = {
     "first_plan_wait": Param(float, 0.0, "auto (planner beside the node): seconds the cell's first decision waits "
                                          "for the planner's first plan (0: it is GRP's at once, and the plan takes "
                                          "over when it comes)", 0.0, 60.0),
-    "ack_timeout": Param(float, 5.0, "seconds before an assignment the world did not take is offered again "
-                         "(from when the decision went out: its snapshots' time plus the time it took)",
-                         0.01, 3600.0),
+    "ack_timeout": Param(float, 5.0, "seconds (of the world's clock, the states' stamps) before an assignment the "
+                         "world did not take is offered again, from when the decision went out "
+                         "(lvws_ros.core.online.sent_at)", 0.01, 3.6e6),
     "expect_subscribers": Param(int, 0, "the first decision waits (at most 20 s) until this many nodes subscribe "
                                         "to lvws/assignments", 0, 1000, read_only=True),
     "managed": Param(bool, False, "a managed lifecycle node: configure loads the policies and the model, activate "

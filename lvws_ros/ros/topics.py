@@ -4,7 +4,8 @@ Every name is relative, so a node's namespace moves all of them: in the root nam
 ``lvws/team_state`` is ``/lvws/team_state``; with ``--ros-args -r __ns:=/cellA`` it is
 ``/cellA/lvws/team_state``. Health goes to ``diagnostics`` (``/diagnostics`` in the root
 namespace, as diagnostic_aggregator expects; ``/cellA/diagnostics`` in a cell, with the
-node's fully qualified name as ``hardware_id``). The simulator publishes ``clock``; nodes on
+node's fully qualified name as ``hardware_id``). The simulator publishes ``clock`` (so does a
+dispatcher with ``publish_clock``, its cell's clock at a rate other than 1); nodes on
 sim time in a namespace take it with ``-r /clock:=clock`` (``lvws launch --namespace``
 passes it), so two cells on one domain keep two clocks.
 """

@@ -10,7 +10,7 @@ import pytest
 
 from conftest import CASE_STUDY
 from lvws_ros.core.executor import Budgeted, decision_deadline
-from lvws_ros.core.online import OnlineScheduler, RobotInfo, TaskInfo
+from lvws_ros.core.online import OnlineScheduler, RobotInfo, TaskInfo, sent_at
 from lvws_ros.errors import InstanceError, PolicyError
 from lvws_ros.registry import make_policy
 from lvws_ros.sim.config import load_cell_config
@@ -123,6 +123,27 @@ def test_the_ack_timeout_counts_from_when_a_slow_decision_went_out_not_from_its_
     online.offer_graph(dataclasses.replace(sim.graph_snapshot(), stamp=0.6))
     again = online.decide()
     assert again is not None and {t for t, _ in again.assignments} == {t for t, _ in first.assignments}
+
+
+def test_a_decision_stamped_on_a_faster_world_clock_is_pending_from_its_stamp_not_from_another_clocks():
+    """A node that follows a world's clock running ten times faster than the wall's: a
+    decision of 1 wall second (its latency) went out 10 s of the world's clock after its
+    snapshots (its stamp). States stamped before that (queued while it was decided) never
+    time it out; a stamp on another clock altogether (a day off) does not count."""
+    sim, online = fresh()
+    first = online.decide()
+    assert first is not None
+    tasks = {t for t, _ in first.assignments}
+    online.published(dataclasses.replace(first, latency=1.0, published=10.0))
+    assert sent_at(dataclasses.replace(first, latency=1.0, published=10.0), 0.0) == 10.0
+    assert sent_at(dataclasses.replace(first, latency=1.0, published=2e9), 0.0) == 1.0  # on a clock of its own
+    online.offer_team(dataclasses.replace(sim.team_snapshot(), stamp=9.0))  # queued before it went out
+    online.offer_graph(dataclasses.replace(sim.graph_snapshot(), stamp=9.0))
+    assert online.decide() is None and set(online.pending) == tasks
+    online.offer_team(dataclasses.replace(sim.team_snapshot(), stamp=16.0))  # 6 s after, never taken
+    online.offer_graph(dataclasses.replace(sim.graph_snapshot(), stamp=16.0))
+    again = online.decide()
+    assert again is not None and {t for t, _ in again.assignments} == tasks
 
 
 def test_capabilities_must_agree():

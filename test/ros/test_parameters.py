@@ -125,6 +125,25 @@ def test_params_file_wins_over_the_launchers_defaults_and_explicit_arguments_ove
     assert f"instance:={Path('cell.json').resolve()}" in waits["cell_sim"]
 
 
+def test_action_robots_faster_than_real_time_follow_the_dispatchers_clock_and_at_rate_1_every_node_the_wall(tmp_path):
+    from lvws_ros.ros.launcher import _actions_commands, _commands
+
+    def actions(rate: float, file_params: dict[str, object]) -> dict[str, list[str]]:
+        every = _commands(tmp_path / "bag", policy=None, seed=None, model_path="", rate=rate, config="",
+                          file_params=file_params, summary=tmp_path / "s.json", gif=None, sync=True)
+        return _actions_commands(every, tmp_path / "cell.json", rate, tmp_path / "s.json", "", 2)
+
+    fast = actions(10.0, {})
+    assert "rate:=10.0" in fast["dispatcher"] and "publish_clock:=true" in fast["dispatcher"]
+    assert "--rate" in fast["fake_robots"] and "10.0" in fast["fake_robots"]
+    assert "use_sim_time:=true" in fast["scheduler"] and "use_sim_time:=true" in fast["recorder"]
+    assert "ack_timeout:=50.0" in fast["scheduler"]  # the default's 5 s of wall time, on the cell's clock
+    assert "ack_timeout:=50.0" not in actions(10.0, {"ack_timeout": 2.0})["scheduler"]  # the file's own stands
+    real = actions(1.0, {})
+    assert "publish_clock:=false" in real["dispatcher"] and "rate:=1.0" in real["dispatcher"]
+    assert not any(a.startswith(("use_sim_time:=", "ack_timeout:=")) for cmd in real.values() for a in cmd)
+
+
 def test_a_float_parameter_given_an_int_is_refused_with_a_clear_message(tmp_path):
     import subprocess
     import sys

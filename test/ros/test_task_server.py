@@ -271,6 +271,7 @@ def test_the_plain_example_server_answers_a_goal(dispatcher):
     (["--robots", "mover,ghost"], "'ghost'"),
     (["--abort", "ghost:carry"], "'ghost'"),
     (["--crash", "mover"], "'mover'"),
+    (["--abort", "mover:carry:flying"], "unknown phase 'flying'"),
     (["--rate", "0"], "--rate"),
     (["--noise", "1.5"], "--noise"),
 ])
