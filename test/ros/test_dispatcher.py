@@ -459,6 +459,15 @@ def test_bad_cell_file_exits_2_naming_the_unknown_trait(tmp_path):
 
 
 
+def test_a_dispatcher_asked_to_publish_the_clock_it_follows_exits_2_saying_why(tmp_path):
+    path = tmp_path / "cell.json"
+    path.write_text(json.dumps(CELL))
+    out = subprocess.run([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path), "--ros-args", "-p",
+                          "publish_clock:=true", "-p", "use_sim_time:=true"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "publish_clock with use_sim_time" in out.stderr, out.stdout + out.stderr
+    assert "Traceback" not in out.stderr
+
+
 def _longest_chain(tasks: list[dict[str, Any]]) -> float:
     """The longest chain of durations through the tasks' precedences (no travel)."""
     by_id = {t["id"]: t for t in tasks}
