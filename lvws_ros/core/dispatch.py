@@ -22,7 +22,8 @@ Rules:
 * ``"departure": "each"``: a task may be given to busy members. A busy member's goal is
   held in its queue and goes out (:attr:`Outcome.send`) the moment it is free (the task it
   serves is done, or its goal ended on a cancel), with ``planned_start`` re-timed to when
-  it can be there. A member that leaves the team (rejected, aborted, lost, set failed)
+  it can be there; when that moves the task's start, :attr:`Outcome.moved` says so for the
+  members already sent. A member that leaves the team (rejected, aborted, lost, set failed)
   also gives back the tasks it was given and had not set out for: each returns READY, its
   other members' goals cancelled or dropped from their queues. A robot never has two
   goals at once.
@@ -44,9 +45,10 @@ from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.formats import instance_from_dict, instance_to_dict
 from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot, graph_sites, roles_code
 from lvws_ros.core.problem import Instance
+from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import DispatchRefused, InstanceError
 
-__all__ = ["Dispatch", "Goal", "GoalKind", "GoalNews", "GoalSpec", "Outcome"]
+__all__ = ["Dispatch", "Goal", "GoalKind", "GoalNews", "GoalSpec", "Moved", "Outcome"]
 
 
 class GoalKind(enum.IntEnum):
@@ -114,6 +116,16 @@ class GoalNews:
     message: str = ""
 
 
+@dataclass(frozen=True)
+class Moved:
+    """A task's planned start moved later after some of its goals went out (a member set out
+    later than planned): the members already on their way wait for the new one."""
+
+    task: str
+    subteam: tuple[str, ...]
+    planned_start: float
+
+
 @dataclass
 class Outcome:
     """What an input did: goal events to publish, goals to cancel (keys), notes for the
@@ -124,9 +136,11 @@ class Outcome:
     notes: list[str] = field(default_factory=list)
     changed: bool = False
     send: list[GoalSpec] = field(default_factory=list)  # goals due now ("departure": "each": a member now free)
+    moved: list[Moved] = field(default_factory=list)  # planned starts that moved after goals went out
 
     def add(self, other: Outcome) -> Outcome:
         self.send += other.send
+        self.moved += other.moved
         self.news += other.news
         self.cancel += other.cancel
         self.notes += other.notes
@@ -302,14 +316,16 @@ class Dispatch:
         """The robot's goal on ``task`` (its part), due now (in ``Outcome.send``)."""
         t, spec = self.tasks[task], self._specs[task]
         site, site_to = self._sites(task)
-        # re-timed: a member that sets out later than expected moves the task's start
-        t.planned_start = max(t.planned_start, now + self._travel_time(robot, site))
-        t.expected_end = t.planned_start + float(spec.duration)
+        out = Outcome()
+        # re-timed: a member that sets out later than expected moves the task's start (for those sent too)
+        start = max(t.planned_start, now + self._travel_time(robot, site))
+        if t.goals and start > t.planned_start + TOLERANCE:
+            out.moved.append(Moved(task, t.team, start))
+        t.planned_start, t.expected_end = start, start + float(spec.duration)
         key = self._next_key
         self._next_key += 1
         self.goals[key] = Goal(key, task, robot, now, heard=now)
         t.goals[robot] = self.robots[robot].goal = key
-        out = Outcome()
         out.send.append(GoalSpec(key, task, robot, t.team, site, site_to or site,
                                  tuple(n for n, _ in spec.requires), tuple(float(a) for _, a in spec.requires),
                                  t.planned_start, float(spec.duration)))

@@ -7,8 +7,9 @@ the site it is at to ``goal.site`` (the distance over its speed; a fixed robot, 
 speed, never leaves its site, and aborts a goal elsewhere), then works for
 ``planned_duration`` (times the ``--noise`` factor of the task, the cell simulator's rule:
 :func:`~lvws_ros.sim.instance_world.duration_factor`), and ends at ``goal.site_to`` (or
-``goal.site``). Arrived before ``goal.planned_start`` (seconds of ROS time; 0: none), it
-waits there, reporting ``waiting``, and starts work at the planned start: the dispatcher plans
+``goal.site``). Arrived before ``goal.planned_start`` (seconds of ROS time; 0: none, or
+the later start the dispatcher published since on ``lvws/planned_starts``), it waits there,
+reporting ``waiting``, and starts work at the planned start: the dispatcher plans
 the start for when the last member of the subteam can be there (each member sets out once it
 is free). A member later than planned does not hold the others back: each starts at the
 planned start or on arrival, whichever is later (the dispatcher counts the task from its last
@@ -101,20 +102,26 @@ class FakeRobot(TaskServer):
         travel = self.instance.travel
         if travel is not None and target is not None:
             self.site, self.xy = target, travel.coordinates[target]
-        wait = (float(goal.planned_start) - super().now()) * self.options.rate  # robot seconds until the plan's start
-        if wait > MAX_WAIT:  # a planned start on another clock than this robot's
-            self.get_logger().warning(f"{self.robot_id}: task {goal.task_id!r} planned to start {wait:.0f} s from now: "
-                                      "the dispatcher's clock is not this robot's (--rate, --use-sim-time); "
-                                      "starting at once")
-        elif goal.planned_start > 0 and wait > 0:
-            here = self._way(target, goal.site)
-            self._phase(feedback, WAITING, wait, (share, share), lambda f: here(1.0))
+        self._wait(feedback, share, self._way(target, goal.site))
         # a transport (site_to elsewhere) moves its subteam while it works
         self._phase(feedback, WORKING, work, (share, 1.0), self._way(end, goal.site_to or goal.site),
                     task=goal.task_id)
         return ExecuteTask.Result(success=True, duration=work,
                                   message=f"{self.robot_id} did its part of {goal.task_id!r} in {work:.2f} s"
                                           f"{' after ' + format(way, '.2f') + ' s of travel' if way else ''}")
+
+    def _wait(self, feedback: TaskFeedback, share: float, here: Where) -> None:
+        """At the site before the planned start: report ``waiting`` until it (the start
+        may move later meanwhile: :attr:`TaskFeedback.planned_start`)."""
+        while (left := feedback.planned_start - super().now()) > 0:  # seconds of the node's clock
+            if left * self.options.rate > MAX_WAIT:  # a planned start on another clock than this robot's
+                self.get_logger().warning(f"{self.robot_id}: task {feedback.goal.task_id!r} planned to start "
+                                          f"{left * self.options.rate:.0f} s from now: the dispatcher's clock is not "
+                                          "this robot's (--rate, --use-sim-time); starting at once")
+                return
+            site, pose = here(1.0)
+            feedback.send(WAITING, share, site, pose)
+            feedback.sleep(min(FEEDBACK_SECONDS, left))
 
     def _site(self, name: str) -> int | None:
         """The index of site ``name`` ('' or a cell without sites: where the robot is)."""

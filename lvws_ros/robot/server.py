@@ -36,6 +36,7 @@ from typing import Any
 
 from geometry_msgs.msg import Pose2D
 from lvws_msgs.action import ExecuteTask
+from lvws_msgs.msg import PlannedStart
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -46,6 +47,7 @@ from rclpy.validate_node_name import validate_node_name
 from rclpy.validate_topic_name import validate_topic_name
 
 from lvws_ros.errors import ConfigError, LvwsError
+from lvws_ros.rosbase.goals import ACTION_NAME, PLANNED_STARTS_QOS, PLANNED_STARTS_TOPIC
 from lvws_ros.rosbase.names import check_namespace
 from lvws_ros.rosbase.spin import RCLError, spin_once
 
@@ -61,7 +63,6 @@ __all__ = [
     "serve",
 ]
 
-ACTION_NAME = "execute_task"  # each robot's server: <robot id>/execute_task
 PHASES = (ExecuteTask.Feedback.PHASE_TRAVELLING, ExecuteTask.Feedback.PHASE_WAITING,
           ExecuteTask.Feedback.PHASE_WORKING)
 SHUTDOWN_CHECK = 0.5  # wall seconds between two looks at whether a signal shut the servers down
@@ -105,6 +106,13 @@ class TaskFeedback:
     def goal(self) -> Any:
         """The ``ExecuteTask.Goal``."""
         return self._handle.request
+
+    @property
+    def planned_start(self) -> float:
+        """When the plan starts the task (ROS time; 0: no plan): the goal's, or a later one
+        published since (:meth:`TaskServer.planned_start`). A server that waits at the site
+        for its subteam waits for this."""
+        return self._server.planned_start(self.goal)
 
     @property
     def cancelled(self) -> bool:
@@ -171,6 +179,8 @@ class TaskServer(Node):
         self.robot_id = robot_id
         self._lock = threading.Lock()
         self._busy: str | None = None  # the task id of the goal accepted and not yet finished
+        self._starts: dict[str, tuple[tuple[str, ...], float]] = {}  # task -> (subteam, latest planned start)
+        self.create_subscription(PlannedStart, PLANNED_STARTS_TOPIC, self._on_start, PLANNED_STARTS_QOS)
         self._action = ActionServer(self, ExecuteTask, name, execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=self._on_cancel,
                                     callback_group=ReentrantCallbackGroup())
@@ -193,6 +203,20 @@ class TaskServer(Node):
     def now(self) -> float:
         """Seconds on the node's clock (ROS time: simulated with ``use_sim_time``)."""
         return float(self.get_clock().now().nanoseconds) / 1e9
+
+    def planned_start(self, goal: Any) -> float:
+        """When the plan starts ``goal``'s task (ROS time; 0: no plan): the goal's
+        ``planned_start``, or the later one the dispatcher published since on
+        ``lvws/planned_starts`` for the same subteam (a member set out later than planned)."""
+        with self._lock:
+            moved = self._starts.get(goal.task_id)
+        same = moved is not None and moved[0] == tuple(goal.subteam)
+        return max(float(goal.planned_start), moved[1]) if same and moved is not None else float(goal.planned_start)
+
+    def _on_start(self, msg: Any) -> None:
+        if self.robot_id in msg.subteam:
+            with self._lock:
+                self._starts[msg.task_id] = (tuple(msg.subteam), float(msg.planned_start))
 
     @property
     def busy_with(self) -> str | None:
@@ -243,6 +267,7 @@ class TaskServer(Node):
         finally:
             with self._lock:
                 self._busy = None
+                self._starts.pop(task, None)
         return self._end(goal_handle, "succeed", _result(out, feedback, True, f"{self.robot_id} did task {task!r}"))
 
     def _end(self, goal_handle: ServerGoalHandle, how: str, result: Any) -> Any:

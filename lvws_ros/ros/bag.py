@@ -43,7 +43,7 @@ from lvws_ros.ros.topics import (
 __all__ = ["Run", "flush", "open_writer", "qos_from_bag", "qos_to_bag", "read_run", "reindex", "typestore"]
 
 LVWS_TYPES = ("RobotState", "TeamState", "Site", "Task", "TaskGraph", "Assignment", "AssignmentArray", "GoalEvent",
-              "CellChanges")
+              "CellChanges", "PlannedStart")
 
 
 def typestore() -> Typestore:

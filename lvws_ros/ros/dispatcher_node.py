@@ -20,7 +20,7 @@ from action_msgs.msg import GoalInfo, GoalStatus
 from action_msgs.srv import CancelGoal
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lvws_msgs.action import ExecuteTask
-from lvws_msgs.msg import AssignmentArray, GoalEvent
+from lvws_msgs.msg import AssignmentArray, GoalEvent, PlannedStart
 from lvws_msgs.srv import CancelTask, SetRobotFault, SubmitInstanceTasks
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.action import ActionClient
@@ -37,10 +37,10 @@ from lvws_ros.errors import ConfigError, DispatchRefused, LvwsError
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.entry import node_main, spin_once
 from lvws_ros.ros.state_publisher import StatePublisher
+from lvws_ros.rosbase.goals import ACTION_NAME, PLANNED_STARTS_QOS, PLANNED_STARTS_TOPIC
 
 __all__ = ["DispatcherNode", "cell_clock", "free_by_answer", "main", "node_clock"]
 
-ACTION = "execute_task"  # each robot's server: <robot id>/execute_task
 CLOCK_SECONDS = 0.02  # publish_clock: the cell's clock on /clock this often (seconds of the node's clock)
 MAX_RATE = 1000.0  # the cell's clock starts at the node's (about 1.8e9 s): at this rate int32 stamps last 4 days
 WATCH_SECONDS = 0.25  # how often the robots' servers and silences are looked at
@@ -130,15 +130,16 @@ class DispatcherNode(Node):
                          "once its dependents have started (-1: never)")),
             self.frame_id)
         self.events_pub = self.create_publisher(GoalEvent, topics.GOAL_EVENTS_TOPIC, topics.GOAL_EVENTS_QOS)
+        self.starts_pub = self.create_publisher(PlannedStart, PLANNED_STARTS_TOPIC, PLANNED_STARTS_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, topics.DIAGNOSTICS_QOS)
         self.create_subscription(AssignmentArray, topics.ASSIGNMENTS_TOPIC, self.on_assignments,
                                  topics.ASSIGNMENTS_QOS)
         self.create_service(SubmitInstanceTasks, "submit_tasks", self.on_submit)
         self.create_service(CancelTask, "cancel_task", self.on_cancel)
         self.create_service(SetRobotFault, "set_robot_fault", self.on_fault)
-        self.servers = {r.id: _Server(ActionClient(self, ExecuteTask, f"{r.id}/{ACTION}"),
-                                      self.resolve_topic_name(f"{r.id}/{ACTION}") + "/_action/status",
-                                      self.create_client(CancelGoal, f"{r.id}/{ACTION}/_action/cancel_goal"))
+        self.servers = {r.id: _Server(ActionClient(self, ExecuteTask, f"{r.id}/{ACTION_NAME}"),
+                                      self.resolve_topic_name(f"{r.id}/{ACTION_NAME}") + "/_action/status",
+                                      self.create_client(CancelGoal, f"{r.id}/{ACTION_NAME}/_action/cancel_goal"))
                         for r in self.cell.inst.robots}
         self.goal_of: dict[int, str] = {}  # goal key -> robot
         self.last_uuid: dict[str, UUID] = {}  # robot -> the goal id of its latest goal
@@ -152,7 +153,7 @@ class DispatcherNode(Node):
         self.create_timer(WATCH_SECONDS, self.watch)
         self.create_timer(PROGRESS_SECONDS, self.log_progress)
         self.get_logger().info(f"cell {path}: {len(self.servers)} robot(s), {len(self.cell.tasks)} task(s); "
-                               f"goals to <robot>/{ACTION}, robot_timeout {self.robot_timeout:g} s")
+                               f"goals to <robot>/{ACTION_NAME}, robot_timeout {self.robot_timeout:g} s")
 
     def _clock_publisher(self) -> Any:
         """The publisher of the cell's clock (``publish_clock``; None: not asked for), every
@@ -220,11 +221,17 @@ class DispatcherNode(Node):
         return not self.waiting
 
     def apply(self, out: Outcome) -> None:
-        """Send the goals now due (departure each: a member free for its next task), publish
-        what an input did: goal events, cancels, warnings, the new state."""
+        """Send the goals now due (departure each: a member free for its next task) and the
+        planned starts that moved, publish what an input did: goal events, cancels,
+        warnings, the new state."""
+        now = self.now()
+        for moved in out.moved:  # before the goals: a member sent now has the new start in its goal anyway
+            msg = PlannedStart(task_id=moved.task, subteam=list(moved.subteam),
+                               planned_start=self.to_node_clock(moved.planned_start))
+            msg.header.stamp = convert.to_time(now)
+            self.starts_pub.publish(msg)
         for spec in out.send:
             self.send(spec)
-        now = self.now()
         for news in out.news:
             self.events_pub.publish(convert.goal_event_to_msg(news, now))
             if news.kind in (GoalKind.REJECTED, GoalKind.ABORTED, GoalKind.LOST):

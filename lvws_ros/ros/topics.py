@@ -18,6 +18,8 @@ from typing import Any
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from lvws_ros.rosbase.goals import PLANNED_STARTS_QOS, PLANNED_STARTS_TOPIC
+
 TEAM_TOPIC = "lvws/team_state"
 GRAPH_TOPIC = "lvws/task_graph"
 ASSIGNMENTS_TOPIC = "lvws/assignments"
@@ -52,6 +54,7 @@ TOPICS: dict[str, tuple[str, QoSProfile]] = {
     CLOCK_TOPIC: ("rosgraph_msgs/msg/Clock", CLOCK_QOS),
     GOAL_EVENTS_TOPIC: ("lvws_msgs/msg/GoalEvent", GOAL_EVENTS_QOS),  # the dispatcher's (a world of real robots)
     CHANGES_TOPIC: ("lvws_msgs/msg/CellChanges", CHANGES_QOS),  # a world that speaks changes
+    PLANNED_STARTS_TOPIC: ("lvws_msgs/msg/PlannedStart", PLANNED_STARTS_QOS),  # the dispatcher's, to the robots
 }
 
 

@@ -303,6 +303,67 @@ def test_a_member_that_fails_on_its_way_while_the_other_waits_at_the_site_releas
     assert "valid by formats.md: yes" in executed_is_valid(bag, tmp_path)
 
 
+# b works t0 at "far" (10 m off, 10 s) and comes back to x for t1 with a, who drives 20 m from "home": given
+# both tasks at once, a sets out at once, is at x at 20 and waits for the planned start, 30. b's own process
+# works 1.9 x slower (noise seed 38 gives t0 that factor): 9 s late, it sets out for t1 at 29, and the start
+# moves to 39 while a waits
+LATE = {
+    "format": "lvws-instance/1", "name": "late", "capabilities": ["hold", "fix"], "departure": "each",
+    "sites": {"x": [0, 0], "far": [10, 0], "home": [0, 20]},
+    "robots": [{"id": "a", "capabilities": [1, 0], "payload": 1, "site": "home", "speed": 1.0},
+               {"id": "b", "capabilities": [0, 1], "payload": 1, "site": "x", "speed": 1.0}],
+    "tasks": [{"id": "t0", "capabilities": [0, 1], "payload": 0, "duration": 10, "after": [], "site": "far"},
+              {"id": "t1", "capabilities": [1, 1], "payload": 0, "duration": 2, "after": [], "site": "x"}],
+}
+
+
+def test_a_member_later_than_planned_moves_the_start_and_the_member_waiting_at_the_site_waits_for_it(
+        ros_context, tmp_path):
+    """Departing each, the assignments published here (no scheduler): ``a`` is sent to t1
+    while ``b`` still works on t0; ``b`` is late, and when it sets out the dispatcher
+    publishes t1's new planned start on lvws/planned_starts. ``a``, there first, waits for
+    it: it starts with ``b``, not at the start its goal named."""
+    from lvws_msgs.msg import PlannedStart
+
+    from lvws_ros.rosbase.goals import PLANNED_STARTS_QOS, PLANNED_STARTS_TOPIC
+
+    path = tmp_path / "cell.json"
+    path.write_text(json.dumps(LATE))
+    node = rclpy.create_node("lvws_dispatch_late", context=ros_context)
+    executor = rclpy.executors.SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    c = Cell(path, node, executor)
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(GoalEvent, GOAL_EVENTS_TOPIC, c.events.append, reliable)
+    node.create_subscription(TaskGraph, GRAPH_TOPIC, c.graphs.append, GRAPH_QOS)
+    node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), DIAGNOSTICS_TOPIC,
+                             lambda m: c.diags.extend(s.message for s in m.status), reliable)
+    moved: list[PlannedStart] = []
+    node.create_subscription(PlannedStart, PLANNED_STARTS_TOPIC, moved.append, PLANNED_STARTS_QOS)
+    pub = node.create_publisher(AssignmentArray, ASSIGNMENTS_TOPIC, ASSIGNMENTS_QOS)
+    try:
+        c.procs["dispatcher"] = _start([sys.executable, "-m", "lvws_ros.cli", "dispatcher", str(path), "--ros-args",
+                                        "-p", f"robot_timeout:={CALM}", "-p", f"rate:={RATE}"])
+        c.procs["a"] = c.robots("a")
+        c.procs["b"] = c.robots("b", "--noise", "0.9", "--noise-seed", "38")
+        up = lambda r: any(f"{r} is back in the team (was down)" in d for d in c.diags)  # noqa: E731
+        assert c.spin(30, lambda: pub.get_subscription_count() >= 1 and up("a") and up("b")), c.output("dispatcher")
+        pub.publish(AssignmentArray(decision_step=0, assignments=[Assignment(task_id="t0", robot_ids=["b"]),
+                                                                  Assignment(task_id="t1", robot_ids=["a", "b"])]))
+        assert c.spin(60, c.done), c.output("dispatcher")
+    finally:
+        c.stop()
+        node.destroy_node()
+    assert [(m.task_id, sorted(m.subteam)) for m in moved] == [("t1", ["a", "b"])]
+    sent = {e.robot_id: c.events.index(e) for e in c.of(GoalEvent.KIND_SENT) if e.task_id == "t1"}
+    assert sent["a"] < sent["b"]  # a set out while b was busy
+    work = {r: next(from_time(e.stamp) for e in c.of(GoalEvent.KIND_FEEDBACK, r)
+                    if e.task_id == "t1" and e.phase == "working") for r in ("a", "b")}
+    waited = [e for e in c.of(GoalEvent.KIND_FEEDBACK, "a") if e.task_id == "t1" and e.phase == "waiting"]
+    assert waited and work["a"] >= work["b"] - 3.0, work  # with b, not 9 s of the cell's time before
+    never_double_booked(c)
+
+
 def test_a_cancel_answer_frees_a_lost_robot_only_when_its_goal_is_unknown_or_over():
     from action_msgs.srv import CancelGoal
 

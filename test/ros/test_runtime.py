@@ -32,12 +32,13 @@ from lvws_ros.ros.topics import (
     message_class,
     split_topic,
 )
+from lvws_ros.rosbase.goals import PLANNED_STARTS_TOPIC
 
 pytestmark = pytest.mark.ros  # crosses processes over real DDS
 
 REFERENCE_BAG = REPO / "bags" / "reference" / "case-study-lvws"
-# the root namespace's (goal events: a dispatcher's; changes: a world that speaks them)
-ALL_TOPICS = {f"/{t}" for t in TOPICS if t not in (GOAL_EVENTS_TOPIC, CHANGES_TOPIC)}
+# the root namespace's (goal events, planned starts: a dispatcher's; changes: a world that speaks them)
+ALL_TOPICS = {f"/{t}" for t in TOPICS if t not in (GOAL_EVENTS_TOPIC, CHANGES_TOPIC, PLANNED_STARTS_TOPIC)}
 
 
 def read_with_anyreader(bag: Path) -> dict[str, int]:
