@@ -45,10 +45,11 @@ from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.formats import instance_from_dict, instance_to_dict
 from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot, graph_sites, roles_code
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import TOLERANCE
 from lvws_ros.errors import DispatchRefused, InstanceError
 
-__all__ = ["Dispatch", "Goal", "GoalKind", "GoalNews", "GoalSpec", "Moved", "Outcome"]
+__all__ = ["RETIME_SECONDS", "Dispatch", "Goal", "GoalKind", "GoalNews", "GoalSpec", "Moved", "Outcome"]
+
+RETIME_SECONDS = 0.5  # a start moved by less (the answers' own latency) is not announced to the members sent
 
 
 class GoalKind(enum.IntEnum):
@@ -319,7 +320,7 @@ class Dispatch:
         out = Outcome()
         # re-timed: a member that sets out later than expected moves the task's start (for those sent too)
         start = max(t.planned_start, now + self._travel_time(robot, site))
-        if t.goals and start > t.planned_start + TOLERANCE:
+        if t.goals and start > t.planned_start + RETIME_SECONDS:
             out.moved.append(Moved(task, t.team, start))
         t.planned_start, t.expected_end = start, start + float(spec.duration)
         key = self._next_key

@@ -11,10 +11,11 @@ speed, never leaves its site, and aborts a goal elsewhere), then works for
 the later start the dispatcher published since on ``lvws/planned_starts``), it waits there,
 reporting ``waiting``, and starts work at the planned start: the dispatcher plans
 the start for when the last member of the subteam can be there (each member sets out once it
-is free). A member later than planned does not hold the others back: each starts at the
-planned start or on arrival, whichever is later (the dispatcher counts the task from its last
-member's start). Feedback comes every 0.1 s of wall time: the phase, the progress over travel
-and work together, the site (empty while travelling) and the pose (interpolated between
+is free). A member that sets out late moves the start (the others wait for the new one);
+one that is slow on its way holds nobody back: each starts at the planned start or on
+arrival, whichever is later (the dispatcher counts the task from its last member's
+start). Feedback comes every 0.1 s of wall time: the phase, the progress over travel and
+work together, the site (empty while travelling) and the pose (interpolated between
 the sites' coordinates). A transport's work (``site_to`` elsewhere) moves the robot from
 ``site`` to ``site_to``, reported between sites. A goal stopped on the way (cancelled or
 aborted) leaves the robot between sites, at the pose it last reported (its next travel is

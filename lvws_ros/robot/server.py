@@ -110,9 +110,10 @@ class TaskFeedback:
     @property
     def planned_start(self) -> float:
         """When the plan starts the task (ROS time; 0: no plan): the goal's, or a later one
-        published since (:meth:`TaskServer.planned_start`). A server that waits at the site
-        for its subteam waits for this."""
-        return self._server.planned_start(self.goal)
+        the dispatcher published on ``lvws/planned_starts`` for this goal's task and subteam
+        while the robot serves it (a member set out later than planned). A server that
+        waits at the site for its subteam waits for this."""
+        return self._server._latest_start(self.goal)
 
     @property
     def cancelled(self) -> bool:
@@ -204,18 +205,19 @@ class TaskServer(Node):
         """Seconds on the node's clock (ROS time: simulated with ``use_sim_time``)."""
         return float(self.get_clock().now().nanoseconds) / 1e9
 
-    def planned_start(self, goal: Any) -> float:
-        """When the plan starts ``goal``'s task (ROS time; 0: no plan): the goal's
-        ``planned_start``, or the later one the dispatcher published since on
-        ``lvws/planned_starts`` for the same subteam (a member set out later than planned)."""
+    def _latest_start(self, goal: Any) -> float:
+        """:attr:`TaskFeedback.planned_start` of ``goal``, the goal in hand."""
         with self._lock:
             moved = self._starts.get(goal.task_id)
-        same = moved is not None and moved[0] == tuple(goal.subteam)
-        return max(float(goal.planned_start), moved[1]) if same and moved is not None else float(goal.planned_start)
+        if moved is None or moved[0] != tuple(goal.subteam):
+            return float(goal.planned_start)
+        return max(float(goal.planned_start), moved[1])
 
     def _on_start(self, msg: Any) -> None:
-        if self.robot_id in msg.subteam:
-            with self._lock:
+        """A planned start that moved: kept for the goal in hand only (another task's, or
+        one of an attempt over, would hold a later goal back)."""
+        with self._lock:
+            if self._busy == msg.task_id and self.robot_id in msg.subteam:
                 self._starts[msg.task_id] = (tuple(msg.subteam), float(msg.planned_start))
 
     @property
@@ -241,6 +243,7 @@ class TaskServer(Node):
                     reason = f"busy with task {self._busy!r}"
                 else:
                     self._busy = goal.task_id
+                    self._starts.clear()  # whatever moved before this goal was in hand is not its
         if reason is not None:
             self.get_logger().warning(f"{self.robot_id}: rejected the goal of task {goal.task_id!r}: {reason}")
             return GoalResponse.REJECT

@@ -19,6 +19,7 @@ from lvws_msgs.msg import (
     CellTask,
     GoalEvent,
     InstanceTask,
+    PlannedStart,
     RobotState,
     Site,
     Task,
@@ -27,7 +28,7 @@ from lvws_msgs.msg import (
 )
 
 from lvws_ros.core.changes import CellChanges as Changes
-from lvws_ros.core.dispatch import GoalNews
+from lvws_ros.core.dispatch import GoalNews, Moved
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskInfo, TeamSnapshot
 from lvws_ros.errors import ConfigError
@@ -48,6 +49,7 @@ __all__ = [
     "graph_to_msg",
     "instance_task_from_msg",
     "instance_task_to_msg",
+    "planned_start_to_msg",
     "team_from_msg",
     "team_to_msg",
     "to_duration",
@@ -385,6 +387,14 @@ def goal_event_to_msg(news: GoalNews, stamp: float) -> GoalEvent:
     return GoalEvent(stamp=to_time(stamp), kind=int(news.kind), task_id=news.task, robot_id=news.robot,
                      phase=news.phase, progress=float(news.progress), site=news.site, duration=float(news.duration),
                      message=news.message)
+
+
+def planned_start_to_msg(moved: Moved, planned_start: float, stamp: float) -> PlannedStart:
+    """A start that moved: ``planned_start`` on the robots' clock (the dispatcher node's ROS
+    time), stamped ``stamp`` (the cell's clock)."""
+    msg = PlannedStart(task_id=moved.task, subteam=list(moved.subteam), planned_start=float(planned_start))
+    msg.header.stamp = to_time(stamp)
+    return msg
 
 
 _ROLES = {None: InstanceTask.ROLES_DEFAULT, False: InstanceTask.ROLES_NO, True: InstanceTask.ROLES_YES}

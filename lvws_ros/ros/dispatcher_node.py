@@ -226,10 +226,7 @@ class DispatcherNode(Node):
         warnings, the new state."""
         now = self.now()
         for moved in out.moved:  # before the goals: a member sent now has the new start in its goal anyway
-            msg = PlannedStart(task_id=moved.task, subteam=list(moved.subteam),
-                               planned_start=self.to_node_clock(moved.planned_start))
-            msg.header.stamp = convert.to_time(now)
-            self.starts_pub.publish(msg)
+            self.starts_pub.publish(convert.planned_start_to_msg(moved, self.to_node_clock(moved.planned_start), now))
         for spec in out.send:
             self.send(spec)
         for news in out.news:

@@ -10,6 +10,6 @@ __all__ = ["ACTION_NAME", "PLANNED_STARTS_QOS", "PLANNED_STARTS_TOPIC"]
 
 ACTION_NAME = "execute_task"  # each robot's server: <robot id>/execute_task
 PLANNED_STARTS_TOPIC = "lvws/planned_starts"  # lvws_msgs/msg/PlannedStart, from the dispatcher
-# latched (the last ones): a server that starts late still learns the start of the goal it gets
+# volatile: a start moved before a server held its goal is in the goal itself
 PLANNED_STARTS_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                                durability=DurabilityPolicy.TRANSIENT_LOCAL)
+                                durability=DurabilityPolicy.VOLATILE)
