@@ -798,11 +798,14 @@ def solve_exact(
         formulation = "pool"  # the horizon without coalitions is the pool model's
     m, found = _hinted_model(inst, state, h, hint, formulation)
     model, name = m.model, "pool" if isinstance(m, _PoolModel) else "coalition" if h.teams is not None else "boolean"
-    _slot_cumulatives(model, inst, state, h, m.start)
+    roles = _slot_cumulatives(model, inst, state, h, m.start)
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
     solver.parameters.num_workers = workers
     solver.parameters.random_seed = seed
+    if roles and name == "coalition":  # the cumulatives reason with the precedences too (measured: docs/benchmarks.md)
+        solver.parameters.use_hard_precedences_in_cumulative = True
+        solver.parameters.exploit_all_precedences = True
     if work is not None:
         solver.parameters.max_deterministic_time = work
     code = solver.solve(model)
@@ -844,29 +847,32 @@ def _hinted_model(inst: Instance, state: State, h: _Horizon, hint: Schedule,
 
 
 SLOT_CUMULATIVES = True  # the redundant cumulatives of the multi-skill rule (False: the models without them)
-SLOT_SUBSETS = 5  # with roles, a redundant cumulative per subset of the needed traits up to this many (else each alone)
+SLOT_SUBSETS = 8  # with roles, a redundant cumulative per subset of the needed traits up to this many (else each alone)
+SLOT_TERMS = 200_000  # ... while the subsets times the tasks left are at most this many (a model of bounded size)
 
 
 def _slot_cumulatives(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon,
-                      start: dict[int, cp_model.IntVar]) -> None:
+                      start: dict[int, cp_model.IntVar]) -> bool:
     """Redundant cumulatives of the multi-skill rule (roles: a member fills one slot), on the
     tasks' intervals with fixed demands: for a set S of required traits, a task takes at least
     the members its S-slots need (the sum over S of each need over the largest amount a robot
     has; without roles the largest of those, one robot may fill several), all of them robots
     holding a trait of S, of which there are as many as the capacity (a busy one holds its
     unit until it is free). Every subset of up to SLOT_SUBSETS needed traits (each alone and
-    all together beyond), one per distinct set of holders (the largest S). Only when a task
-    left has roles: the other models are left as they were."""
+    all together beyond, or where the subsets times the tasks left exceed SLOT_TERMS), one
+    per distinct set of holders (the largest S). Only when a task
+    left has roles (then True): the other models are left as they were."""
     roles = inst.task_roles
     if not SLOT_CUMULATIVES or not any(roles[j] for j in h.todo):
-        return
+        return False
     needs, amounts = inst.task_needs, inst.robot_amounts
     cols = [int(c) for c in np.flatnonzero((needs[h.todo] > TOLERANCE).any(axis=0))]
     most = amounts.max(axis=0)
     slots = {j: np.where(needs[j] > TOLERANCE, np.ceil((needs[j] - TOLERANCE) / np.maximum(most, TOLERANCE)), 0)
              for j in h.todo}
+    every = len(cols) <= SLOT_SUBSETS and (2 ** len(cols)) * len(h.todo) <= SLOT_TERMS
     sets = [s for k in range(len(cols), 0, -1) for s in itertools.combinations(cols, k)] \
-        if len(cols) <= SLOT_SUBSETS else [*((c,) for c in cols), tuple(cols)]
+        if every else [*((c,) for c in cols), tuple(cols)]
     seen: set[tuple[int, ...]] = set()
     now = h.ticks(state.time)
     intervals = {j: model.new_fixed_size_interval_var(start[j], h.dur[j], f"slots_{j}") for j in h.todo}
@@ -883,6 +889,7 @@ def _slot_cumulatives(model: cp_model.CpModel, inst: Instance, state: State, h: 
         model.add_cumulative([intervals[j] for j in users] +
                              [model.new_fixed_size_interval_var(now, h.free_at[r] - now, f"held_{r}") for r in busy],
                              [demand[j] for j in users] + [1] * len(busy), len(holders))
+    return True
 
 
 def _demand(model: cp_model.CpModel, values: list[int], choice: Sequence[cp_model.IntVar], name: str) -> cp_model.IntVar:

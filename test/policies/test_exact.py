@@ -230,8 +230,9 @@ def test_the_pool_model_has_no_travel():
 @pytest.mark.parametrize("formulation", ["coalition", "boolean", "pool"])
 def test_the_slot_cumulatives_of_roles_keep_every_optimum(formulation, monkeypatch):
     """The redundant cumulatives of the multi-skill rule (a member fills one slot) cut no
-    schedule: with and without them every formulation proves the same optimum, from the
-    start and from a mid-run state (busy robots holding their units)."""
+    schedule: with them (on every subset of the needed traits, or on each alone and all
+    together) and without them every formulation proves the same optimum, from the start
+    and from a mid-run state (busy robots holding their units)."""
     import lvws_ros.policies.exact as exact
     from lvws_ros.core.executor import State
     from lvws_ros.core.families import family_instance
@@ -246,9 +247,10 @@ def test_the_slot_cumulatives_of_roles_keep_every_optimum(formulation, monkeypat
             mid.start(task, team)
         for state in (None, mid):
             runs = []
-            for on in (True, False):
+            for on, terms in ((True, exact.SLOT_TERMS), (True, 0), (False, exact.SLOT_TERMS)):  # 0: no subsets
                 monkeypatch.setattr(exact, "SLOT_CUMULATIVES", on)
+                monkeypatch.setattr(exact, "SLOT_TERMS", terms)
                 runs.append(solve_exact(inst, state=state, workers=2, time_limit=60, formulation=formulation))
             assert all(r.proven for r in runs), inst.name
-            assert runs[0].makespan == pytest.approx(runs[1].makespan), inst.name
+            assert all(r.makespan == pytest.approx(runs[-1].makespan) for r in runs), inst.name
             assert check_schedule(inst, runs[0].schedule) == [], inst.name
