@@ -848,7 +848,7 @@ def _hinted_model(inst: Instance, state: State, h: _Horizon, hint: Schedule,
 
 SLOT_CUMULATIVES = True  # the redundant cumulatives of the multi-skill rule (False: the models without them)
 SLOT_SUBSETS = 8  # with roles, a redundant cumulative per subset of the needed traits up to this many (else each alone)
-SLOT_TERMS = 200_000  # ... while the subsets times the tasks left are at most this many (a model of bounded size)
+SLOT_TERMS = 200_000  # ... while 2^traits times the tasks left are at most this many (a model of bounded size)
 
 
 def _slot_cumulatives(model: cp_model.CpModel, inst: Instance, state: State, h: _Horizon,
@@ -858,37 +858,42 @@ def _slot_cumulatives(model: cp_model.CpModel, inst: Instance, state: State, h: 
     the members its S-slots need (the sum over S of each need over the largest amount a robot
     has; without roles the largest of those, one robot may fill several), all of them robots
     holding a trait of S, of which there are as many as the capacity (a busy one holds its
-    unit until it is free). Every subset of up to SLOT_SUBSETS needed traits (each alone and
-    all together beyond, or where the subsets times the tasks left exceed SLOT_TERMS), one
-    per distinct set of holders (the largest S). Only when a task
-    left has roles (then True): the other models are left as they were."""
+    unit until it is free). Every subset of up to SLOT_SUBSETS needed traits while 2^traits
+    times the tasks left are at most SLOT_TERMS, else all together and each alone; one per
+    distinct set of holders (the largest S). Only when a task left has roles (then True): the
+    other models are left as they were."""
     roles = inst.task_roles
-    if not SLOT_CUMULATIVES or not any(roles[j] for j in h.todo):
+    todo = list(h.todo)
+    if not SLOT_CUMULATIVES or not any(roles[j] for j in todo):
         return False
-    needs, amounts = inst.task_needs, inst.robot_amounts
-    cols = [int(c) for c in np.flatnonzero((needs[h.todo] > TOLERANCE).any(axis=0))]
-    most = amounts.max(axis=0)
-    slots = {j: np.where(needs[j] > TOLERANCE, np.ceil((needs[j] - TOLERANCE) / np.maximum(most, TOLERANCE)), 0)
-             for j in h.todo}
-    every = len(cols) <= SLOT_SUBSETS and (2 ** len(cols)) * len(h.todo) <= SLOT_TERMS
+    needs, amounts = inst.task_needs[todo], inst.robot_amounts
+    cols = [int(c) for c in np.flatnonzero((needs > TOLERANCE).any(axis=0))]
+    most = np.maximum(amounts.max(axis=0), TOLERANCE)
+    slots = np.where(needs > TOLERANCE, np.ceil((needs - TOLERANCE) / most[None, :]), 0.0)  # (tasks, traits)
+    with_roles = np.asarray(roles, dtype=bool)[todo]
+    every = len(cols) <= SLOT_SUBSETS and (2 ** len(cols)) * len(todo) <= SLOT_TERMS
     sets = [s for k in range(len(cols), 0, -1) for s in itertools.combinations(cols, k)] \
-        if every else [*((c,) for c in cols), tuple(cols)]
+        if every else [tuple(cols), *((c,) for c in cols)]  # the largest S first
     seen: set[tuple[int, ...]] = set()
     now = h.ticks(state.time)
-    intervals = {j: model.new_fixed_size_interval_var(start[j], h.dur[j], f"slots_{j}") for j in h.todo}
+    intervals = [model.new_fixed_size_interval_var(start[j], h.dur[j], f"slots_{j}") for j in todo]
+    held: dict[int, cp_model.IntervalVar] = {}  # a busy robot's unit, until it is free
     for subset in sets:
         holders = tuple(int(r) for r in np.flatnonzero((amounts[:, list(subset)] > 0).any(axis=1)))
         if holders in seen:
             continue
         seen.add(holders)
-        demand = {j: int(slots[j][list(subset)].sum() if roles[j] else slots[j][list(subset)].max()) for j in h.todo}
-        users = [j for j in h.todo if demand[j] > 0]
+        part = slots[:, list(subset)]
+        demand = np.where(with_roles, part.sum(axis=1), part.max(axis=1)).astype(np.int64)
+        users = np.flatnonzero(demand > 0)
         busy = [r for r in holders if h.free_at[r] > now]
-        if sum(demand[j] for j in users) + len(busy) <= len(holders):
+        if int(demand.sum()) + len(busy) <= len(holders):
             continue  # never binding
-        model.add_cumulative([intervals[j] for j in users] +
-                             [model.new_fixed_size_interval_var(now, h.free_at[r] - now, f"held_{r}") for r in busy],
-                             [demand[j] for j in users] + [1] * len(busy), len(holders))
+        for r in busy:
+            if r not in held:
+                held[r] = model.new_fixed_size_interval_var(now, h.free_at[r] - now, f"held_{r}")
+        model.add_cumulative([intervals[k] for k in users] + [held[r] for r in busy],
+                             [int(demand[k]) for k in users] + [1] * len(busy), len(holders))
     return True
 
 

@@ -227,6 +227,44 @@ def test_the_pool_model_has_no_travel():
         solve_exact(inst, formulation="pool")
 
 
+def test_the_slot_cumulatives_take_every_subset_within_their_terms(monkeypatch):
+    """Within SLOT_TERMS every subset of the needed traits gets a cumulative (one per set of
+    holders); beyond, all of them together and each alone: fewer, the whole set among them."""
+    from ortools.sat.python import cp_model
+
+    import lvws_ros.policies.exact as exact
+    from lvws_ros.core.executor import State
+    from lvws_ros.core.families import family_instance
+
+    inst = family_instance("traits-roles", 0, 0)
+    state = State.initial(inst)
+    state.refresh()
+    todo = state.tasks_to_do()
+    h = exact._horizon(inst, state, todo, exact.heuristic_schedule(inst, state), coalitions=False)
+    cols = np.flatnonzero((inst.task_needs[todo] > 1e-9).any(axis=0))
+    assert len(cols) >= 3
+
+    class Recording(cp_model.CpModel):  # the capacity of each cumulative added
+        capacities: list[int]
+
+        def add_cumulative(self, intervals, demands, capacity):  # type: ignore[no-untyped-def]
+            self.capacities.append(int(capacity))
+            return super().add_cumulative(intervals, demands, capacity)
+
+    def capacities(terms: int) -> list[int]:
+        monkeypatch.setattr(exact, "SLOT_TERMS", terms)
+        model = Recording()
+        model.capacities = []
+        start = {j: model.new_int_var(0, h.upper, f"S_{j}") for j in todo}
+        assert exact._slot_cumulatives(model, inst, state, h, start)
+        return model.capacities
+
+    every, few = capacities(exact.SLOT_TERMS), capacities(0)
+    holders = int((inst.robot_amounts[:, cols] > 0).any(axis=1).sum())
+    assert len(every) > len(few) >= 1
+    assert max(every) == max(few) <= holders  # the whole set's cumulative in both, when binding
+
+
 @pytest.mark.parametrize("formulation", ["coalition", "boolean", "pool"])
 def test_the_slot_cumulatives_of_roles_keep_every_optimum(formulation, monkeypatch):
     """The redundant cumulatives of the multi-skill rule (a member fills one slot) cut no
