@@ -847,7 +847,7 @@ def _hinted_model(inst: Instance, state: State, h: _Horizon, hint: Schedule,
 
 
 SLOT_CUMULATIVES = True  # the redundant cumulatives of the multi-skill rule (False: the models without them)
-SLOT_SUBSETS = 8  # with roles, a redundant cumulative per subset of the needed traits up to this many (else each alone)
+SLOT_SUBSETS = 8  # with roles, a redundant cumulative per subset of the needed traits up to this many (else all and each)
 SLOT_TERMS = 200_000  # ... while 2^traits times the tasks left are at most this many (a model of bounded size)
 
 

@@ -12,7 +12,7 @@ from twins import twin_instances, with_twins
 from lvws_ros.core.datasets import DATASETS, dataset_instance, random_instance
 from lvws_ros.core.executor import TaskStatus, simulate
 from lvws_ros.core.schedule import check_schedule
-from lvws_ros.core.subteams import covers
+from lvws_ros.core.subteams import TOLERANCE, covers
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 from lvws_ros.policies.exact import solve_exact
 from lvws_ros.registry import make_policy
@@ -241,7 +241,7 @@ def test_the_slot_cumulatives_take_every_subset_within_their_terms(monkeypatch):
     state.refresh()
     todo = state.tasks_to_do()
     h = exact._horizon(inst, state, todo, exact.heuristic_schedule(inst, state), coalitions=False)
-    cols = np.flatnonzero((inst.task_needs[todo] > 1e-9).any(axis=0))
+    cols = np.flatnonzero((inst.task_needs[todo] > TOLERANCE).any(axis=0))
     assert len(cols) >= 3
 
     class Recording(cp_model.CpModel):  # the capacity of each cumulative added
