@@ -33,6 +33,11 @@ units on intervals every feasible cumulative has an assignment, found by giving 
 task, by start time, free robots of the pool. :attr:`ExpertResult.model` says which
 model was solved.
 
+The *assignment model* is the per-robot boolean one with a literal per pair of tasks that
+may overlap (they then share no member), as in Young, Feydy and Schutt's multi-skill model:
+a formulation to choose, not one ``auto`` takes (measured against the coalition model on
+the multi-skill library: ``docs/benchmarks.md``).
+
 It also solves from a mid-run :class:`~lvws_ros.core.executor.State`: tasks done or in
 progress stay as they are, busy robots are free only from their given time on, and
 nothing new starts before the state's time.
@@ -740,7 +745,8 @@ def _pool_solution(inst: Instance, state: State, h: _Horizon, m: _PoolModel, fou
     return left_shift(inst, Schedule.from_assignments(inst, "exact", out), state)
 
 
-FORMULATIONS = ("auto", "coalition", "boolean", "pool")
+FORMULATIONS = ("auto", "coalition", "boolean", "pool", "assignment")
+PAIR_TERMS = 200_000  # the assignment model's pair literals: pairs of tasks times robots at most this many
 
 
 def pools_apply(inst: Instance, state: State | None = None) -> bool:
@@ -776,14 +782,17 @@ def solve_exact(
 
     ``formulation``: "coalition" lists the minimal covering subteams of each task (fast
     for small teams), "boolean" uses a robot-task boolean per pair (any team size),
-    "pool" a count per pool of interchangeable robots and task (no travel), "auto"
-    (default) takes the coalition model when the team has at most MAX_ENUMERATED robots
-    and the coalitions number at most COALITION_LIMIT (on such small teams it proves
-    faster than the pool model, measured on Datasets I-III and the mspsp family), else
-    the pool model when most robots are interchangeable and there is no travel
-    (:func:`pools_apply`), else the boolean one. The result's ``model`` says which was
-    solved. ``work``: a limit of CP-SAT's deterministic time too (with ``workers`` =
-    1 the same result on every run)."""
+    "pool" a count per pool of interchangeable robots and task (no travel),
+    "assignment" the boolean one with a literal per pair of tasks that may overlap
+    (:func:`_overlap_pairs`; with roles its search found shorter schedules on some
+    files of the multi-skill library, its bound is weak; beyond PAIR_TERMS pair
+    literals it is the boolean model and ``model`` says so), "auto" (default) takes the
+    coalition model when the team has at most MAX_ENUMERATED robots and the coalitions
+    number at most COALITION_LIMIT (on such small teams it proves faster than the pool
+    model, measured on Datasets I-III and the mspsp family), else the pool model when
+    most robots are interchangeable and there is no travel (:func:`pools_apply`), else
+    the boolean one. The result's ``model`` says which was solved. ``work``: a limit of
+    CP-SAT's deterministic time too (with ``workers`` = 1 the same result on every run)."""
     _check_formulation(inst, formulation)
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state.copy()
@@ -793,23 +802,46 @@ def solve_exact(
     if not todo:
         sched = schedule_from_state(state, "exact")
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
+    return _solve_model(inst, state, todo, hint, formulation, _Run(time_limit, workers, seed, work, t_start))
+
+
+@dataclass
+class _Run:
+    """One call's solver settings: the limit (seconds, from ``t_start``), the workers,
+    the seed and the deterministic-time limit (None: none)."""
+
+    time_limit: float
+    workers: int
+    seed: int
+    work: float | None
+    t_start: float
+
+    def left(self) -> float:
+        return max(0.01, self.time_limit - (time.perf_counter() - self.t_start))
+
+
+def _solve_model(inst: Instance, state: State, todo: list[int], hint: Schedule, formulation: str,
+                 run: _Run) -> ExpertResult:
+    """One CP-SAT solve of ``formulation`` ("auto" chooses, as :func:`solve_exact` says)."""
     h = _horizon(inst, state, todo, hint, coalitions=formulation in ("auto", "coalition"))
     if formulation == "auto" and h.teams is None and pools_apply(inst, state):
         formulation = "pool"  # the horizon without coalitions is the pool model's
     m, found = _hinted_model(inst, state, h, hint, formulation)
-    model, name = m.model, "pool" if isinstance(m, _PoolModel) else "coalition" if h.teams is not None else "boolean"
+    name = "pool" if isinstance(m, _PoolModel) else "coalition" if h.teams is not None else \
+        "assignment" if formulation == "assignment" and _pairs_fit(inst, todo) else "boolean"
+    model = m.model
     roles = _slot_cumulatives(model, inst, state, h, m.start)
     solver = cp_model.CpSolver()
-    solver.parameters.max_time_in_seconds = max(0.01, time_limit - (time.perf_counter() - t_start))
-    solver.parameters.num_workers = workers
-    solver.parameters.random_seed = seed
+    solver.parameters.max_time_in_seconds = run.left()
+    solver.parameters.num_workers = run.workers
+    solver.parameters.random_seed = run.seed
     if roles and name == "coalition":  # the cumulatives reason with the precedences too (measured: docs/benchmarks.md)
         solver.parameters.use_hard_precedences_in_cumulative = True
         solver.parameters.exploit_all_precedences = True
-    if work is not None:
-        solver.parameters.max_deterministic_time = work
+    if run.work is not None:
+        solver.parameters.max_deterministic_time = run.work
     code = solver.solve(model)
-    seconds = time.perf_counter() - t_start
+    seconds = time.perf_counter() - run.t_start
     found_one = code in (cp_model.OPTIMAL, cp_model.FEASIBLE)
     bound = float(solver.best_objective_bound) / h.scale if found_one else h.lower / h.scale
     if code == cp_model.MODEL_INVALID:
@@ -839,11 +871,60 @@ def _hinted_model(inst: Instance, state: State, h: _Horizon, hint: Schedule,
         _hint_pools(inst, h, pm, found, hint)
         return pm, list(found)
     m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
+    if formulation == "assignment" and _pairs_fit(inst, h.todo):
+        _overlap_pairs(m.model, inst, h, m.start, m.member)
     tv = _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
     teams = _add_hint(inst, h, m, hint, starts=tv is None)
     if tv is not None:
         _hint_travel(inst, state, m.model, tv, h, m.start, hint, teams)
     return m, []
+
+
+def _unordered_pairs(inst: Instance, h: _Horizon) -> list[tuple[int, int]]:
+    """Pairs of tasks left that may run at the same time: neither precedes the other
+    (directly or not) and their start windows let them overlap."""
+    todo = h.todo
+    where = {j: k for k, j in enumerate(todo)}
+    before = {j: 0 for j in todo}  # a bit per task left that must end before j starts
+    for j in inst.topological_order:
+        if j in where:
+            for p in inst.prerequisites[j]:
+                if p in where:
+                    before[j] |= before[p] | (1 << where[p])
+    out = []
+    for a, i in enumerate(todo):
+        for j in todo[a + 1:]:
+            if before[j] >> a & 1 or before[i] >> where[j] & 1:
+                continue
+            if h.upper - h.tail[i] + h.dur[i] <= h.head[j] or h.upper - h.tail[j] + h.dur[j] <= h.head[i]:
+                continue
+            out.append((i, j))
+    return out
+
+
+def _pairs_fit(inst: Instance, todo: list[int]) -> bool:
+    """Whether the assignment model's pair literals stay within PAIR_TERMS (pairs of tasks
+    left times robots, an upper bound)."""
+    return len(todo) * (len(todo) - 1) // 2 * inst.num_robots <= PAIR_TERMS
+
+
+def _overlap_pairs(model: cp_model.CpModel, inst: Instance, h: _Horizon, start: dict[int, cp_model.IntVar],
+                   member: dict[int, dict[int, cp_model.IntVar]]) -> None:
+    """The assignment model's pair literals (as Young, Feydy and Schutt's multi-skill
+    model has them): for each pair of tasks that may overlap (:func:`_unordered_pairs`)
+    and share a robot that could help both, one ends before the other starts, or they
+    overlap and then have no member in common. Redundant with the per-robot no-overlaps;
+    they give the search a literal per pair to branch on."""
+    for i, j in _unordered_pairs(inst, h):
+        common = [r for r in member[i] if r in member[j]]
+        if not common:
+            continue
+        first, second, overlap = (model.new_bool_var(f"{name}_{i}_{j}") for name in ("ij", "ji", "ov"))
+        model.add(start[i] + h.dur[i] <= start[j]).only_enforce_if(first)
+        model.add(start[j] + h.dur[j] <= start[i]).only_enforce_if(second)
+        model.add_bool_or([first, second, overlap])
+        for r in common:
+            model.add_bool_or([member[i][r].Not(), member[j][r].Not(), overlap.Not()])
 
 
 SLOT_CUMULATIVES = True  # the redundant cumulatives of the multi-skill rule (False: the models without them)

@@ -292,3 +292,58 @@ def test_the_slot_cumulatives_of_roles_keep_every_optimum(formulation, monkeypat
             assert all(r.proven for r in runs), inst.name
             assert all(r.makespan == pytest.approx(runs[-1].makespan) for r in runs), inst.name
             assert check_schedule(inst, runs[0].schedule) == [], inst.name
+
+
+def test_the_assignment_model_proves_the_same_optima():
+    """The assignment model (the boolean one with a literal per pair of tasks that may
+    overlap) cuts no schedule: from the start and mid-run it proves the optimum the
+    coalition model proves, and its schedules are valid."""
+    from lvws_ros.core.executor import State
+    from lvws_ros.core.families import family_instance
+
+    for k in range(3):
+        inst = family_instance("traits-roles", k, 0)
+        mid = State.initial(inst)
+        grp = GreedyPayloadPolicy()
+        grp.reset(inst)
+        for task, team in grp.decide(mid).assignments:
+            mid.start(task, team)
+        for state in (None, mid):
+            pairs = solve_exact(inst, state=state, workers=2, time_limit=60, formulation="assignment")
+            coalitions = solve_exact(inst, state=state, workers=2, time_limit=60, formulation="coalition")
+            assert pairs.model == "assignment" and pairs.proven and coalitions.proven, inst.name
+            assert pairs.makespan == pytest.approx(coalitions.makespan), inst.name
+            assert check_schedule(inst, pairs.schedule) == [], inst.name
+
+
+def test_the_pairs_leave_out_tasks_ordered_by_precedence():
+    """A chain a -> b -> c beside a free task d: only the pairs with d may overlap (c after
+    a is ordered through b, with no edge of its own)."""
+    import lvws_ros.policies.exact as exact
+    from lvws_ros.core.executor import State
+    from lvws_ros.core.problem import Instance, Robot, Task
+
+    robots = (Robot("r0", (1,), 1.0), Robot("r1", (1,), 1.0))
+    tasks = (Task("a", (1,), 0.0, 1.0), Task("b", (1,), 0.0, 1.0, after=("a",)),
+             Task("c", (1,), 0.0, 1.0, after=("b",)), Task("d", (1,), 0.0, 1.0))
+    inst = Instance("chain", ("c0",), robots, tasks)
+    state = State.initial(inst)
+    state.refresh()
+    todo = state.tasks_to_do()
+    h = exact._horizon(inst, state, todo, exact.heuristic_schedule(inst, state))
+    h.upper += 10  # windows wide enough for any two free tasks to overlap
+    names = {(inst.tasks[i].id, inst.tasks[j].id) for i, j in exact._unordered_pairs(inst, h)}
+    assert {tuple(sorted(p)) for p in names} == {("a", "d"), ("b", "d"), ("c", "d")}
+
+
+def test_the_assignment_model_beyond_its_pair_limit_is_the_boolean_one(monkeypatch):
+    """Beyond PAIR_TERMS pair literals the assignment formulation solves the boolean model,
+    and the result says so."""
+    import lvws_ros.policies.exact as exact
+    from lvws_ros.core.families import family_instance
+
+    inst = family_instance("traits-roles", 0, 0)
+    monkeypatch.setattr(exact, "PAIR_TERMS", 0)
+    res = solve_exact(inst, workers=2, time_limit=60, formulation="assignment")
+    assert res.model == "boolean" and res.proven
+    assert check_schedule(inst, res.schedule) == []
