@@ -308,18 +308,33 @@ def validate_instance(inst: Instance) -> None:
         if len(set(t.after)) != len(t.after):
             raise InstanceError(f"task {t.id!r} after: duplicate prerequisite ids")
     inst.__dict__["topological_order"] = _topological_order(inst)  # prime the cached_property
+    _check_coverable(inst)
+    if inst.objective not in OBJECTIVES:
+        raise InstanceError(f"objective: expected one of {list(OBJECTIVES)}, got {_short(inst.objective)}")
+    if not isinstance(inst.roles, bool):
+        raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
+    if inst.departure not in DEPARTURES:
+        raise InstanceError(f"departure: expected one of {list(DEPARTURES)}, got {_short(inst.departure)}")
+
+
+def _check_coverable(inst: Instance) -> None:
+    """Every task can be covered by the whole team (Eqs. 10-11 on its sums, once for all
+    tasks; with roles the matching, per task with roles); the first that cannot, named."""
+    k = len(inst.capabilities)
     amounts = inst.robot_amounts
     team = amounts.sum(axis=0)
     team_payload = float(inst.robot_payload.sum())
-    for j, t in enumerate(inst.tasks):
-        missing, short = shortfall(team, team_payload, inst.task_needs[j], t.payload)
-        caps = [inst.cover_names[c] for c in np.flatnonzero(missing[:k])]
+    missing, short = shortfall(team[None, :], team_payload, inst.task_needs, inst.task_payload)
+    bad = (missing > 0).any(axis=1) | (short > 0)
+    for j in np.flatnonzero(bad | inst.task_roles):
+        t = inst.tasks[j]
+        caps = [inst.cover_names[c] for c in np.flatnonzero(missing[j, :k])]
         if caps:
             raise InstanceError(f"task {t.id!r} can never be covered: no robot has capability {caps}")
-        for c in np.flatnonzero(missing[k:]):
+        for c in np.flatnonzero(missing[j, k:]):
             raise InstanceError(f"task {t.id!r} can never be covered: needs {inst.traits[c]} "
                                 f"{inst.task_needs[j, k + c]:g}, the whole team has {team[k + c]:g}")
-        if short > 0:
+        if short[j] > 0:
             raise InstanceError(
                 f"task {t.id!r} can never be covered: needs payload {t.payload}, "
                 f"the whole team carries {team_payload}"
@@ -328,12 +343,6 @@ def validate_instance(inst: Instance) -> None:
             raise InstanceError(f"task {t.id!r} can never be covered: with roles (each member counts toward one "
                                 f"required trait) the whole team does not reach "
                                 f"{_needs_text(inst.cover_names, inst.task_needs[j])}")
-    if inst.objective not in OBJECTIVES:
-        raise InstanceError(f"objective: expected one of {list(OBJECTIVES)}, got {_short(inst.objective)}")
-    if not isinstance(inst.roles, bool):
-        raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
-    if inst.departure not in DEPARTURES:
-        raise InstanceError(f"departure: expected one of {list(DEPARTURES)}, got {_short(inst.departure)}")
 
 
 def _needs_text(names: Sequence[str], need: FloatArray) -> str:

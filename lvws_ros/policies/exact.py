@@ -53,9 +53,10 @@ large-neighbourhood search built on it) are the only ones that import OR-Tools.
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -802,22 +803,88 @@ def solve_exact(
     if not todo:
         sched = schedule_from_state(state, "exact")
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
-    return _solve_model(inst, state, todo, hint, formulation, _Run(time_limit, workers, seed, work, t_start))
+    run = _Run(time_limit, workers, seed, work, t_start)
+    if formulation == "auto" and _side_by_side_applies(inst, todo):
+        return _side_by_side(inst, state, todo, hint, run)
+    return _solve_model(inst, state, todo, hint, formulation, run)
 
 
 @dataclass
 class _Run:
     """One call's solver settings: the limit (seconds, from ``t_start``), the workers,
-    the seed and the deterministic-time limit (None: none)."""
+    the seed and the deterministic-time limit (None: none); with models solved side by
+    side, the solvers running (a proof stops them all)."""
 
     time_limit: float
     workers: int
     seed: int
     work: float | None
     t_start: float
+    solvers: list[cp_model.CpSolver] = field(default_factory=list)
+    over: bool = False  # a model proved its answer: the others stop
+    lock: threading.Lock = field(default_factory=threading.Lock)
 
     def left(self) -> float:
         return max(0.01, self.time_limit - (time.perf_counter() - self.t_start))
+
+    def enter(self, solver: cp_model.CpSolver) -> bool:
+        """Register ``solver`` before it solves; False when another model already proved."""
+        with self.lock:
+            self.solvers.append(solver)
+            return not self.over
+
+    def proved(self) -> None:
+        """A model proved its answer: stop the others (:meth:`stop`). Not under a
+        deterministic-time limit: there each runs its course (the same result on every
+        run, whichever proves first)."""
+        if self.work is None:
+            self.stop()
+
+    def stop(self) -> None:
+        """Stop every solver's search (each returns its best) and any not started yet."""
+        with self.lock:
+            self.over = True
+            for solver in self.solvers:
+                solver.stop_search()
+
+
+def _side_by_side(inst: Instance, state: State, todo: list[int], hint: Schedule, run: _Run) -> ExpertResult:
+    """The "auto" model and the assignment model solved at the same time, each with half the
+    workers (at least one), each from ``hint``; a proof by either stops the other. The proven
+    answer, else the shorter schedule ("auto"'s on a tie), with the better bound of the two.
+    Where the assignment model fails (an error of its own), "auto"'s answer alone."""
+    half = _Run(run.time_limit, max(1, run.workers // 2), run.seed, run.work, run.t_start)
+    out: dict[str, ExpertResult] = {}
+    errors: dict[str, BaseException] = {}
+
+    def solve(formulation: str) -> None:
+        try:
+            out[formulation] = _solve_model(inst, state, todo, hint, formulation, half)
+        except BaseException as exc:  # the caller's thread raises it ("auto"'s) or goes on without it
+            errors[formulation] = exc
+            if formulation == "auto":
+                half.stop()
+
+    threads = [threading.Thread(target=solve, args=(f,), name=f"exact-{f}") for f in ("assignment", "auto")]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    if "auto" in errors:
+        raise errors["auto"]
+    if "assignment" in errors:
+        return out["auto"]
+    first, other = out["auto"], out["assignment"]
+    shorter = (other.makespan or 0) < (first.makespan or 0) - TOLERANCE
+    best = other if not first.proven and (other.proven or shorter) else first
+    assert best.makespan is not None
+    bound = best.makespan if best.proven else min(max(first.bound, other.bound), best.makespan)
+    proven = best.proven or (best.exact_scale and bound >= best.makespan - TOLERANCE)
+    seconds = time.perf_counter() - run.t_start
+    if best.schedule is not None:
+        best.schedule.compute_seconds = seconds
+    return ExpertResult(best.schedule, "optimal" if proven else best.status, best.makespan, bound, seconds,
+                        best.exact_scale, best.model)
 
 
 def _solve_model(inst: Instance, state: State, todo: list[int], hint: Schedule, formulation: str,
@@ -840,7 +907,12 @@ def _solve_model(inst: Instance, state: State, todo: list[int], hint: Schedule, 
         solver.parameters.exploit_all_precedences = True
     if run.work is not None:
         solver.parameters.max_deterministic_time = run.work
+    if not run.enter(solver):  # another model solved side by side proved its answer first
+        return ExpertResult(hint, "unknown", hint.makespan, h.lower / h.scale, time.perf_counter() - run.t_start,
+                            h.exact_scale, name)
     code = solver.solve(model)
+    if code == cp_model.OPTIMAL:
+        run.proved()
     seconds = time.perf_counter() - run.t_start
     found_one = code in (cp_model.OPTIMAL, cp_model.FEASIBLE)
     bound = float(solver.best_objective_bound) / h.scale if found_one else h.lower / h.scale
@@ -900,6 +972,12 @@ def _unordered_pairs(inst: Instance, h: _Horizon) -> list[tuple[int, int]]:
                 continue
             out.append((i, j))
     return out
+
+
+def _side_by_side_applies(inst: Instance, todo: list[int]) -> bool:
+    """Whether "auto" solves the assignment model beside its own: a task left has roles,
+    no travel (not measured with it), and the pair literals fit (:func:`_pairs_fit`)."""
+    return inst.travel is None and bool(np.any(inst.task_roles[todo])) and _pairs_fit(inst, todo)
 
 
 def _pairs_fit(inst: Instance, todo: list[int]) -> bool:

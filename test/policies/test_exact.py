@@ -347,3 +347,61 @@ def test_the_assignment_model_beyond_its_pair_limit_is_the_boolean_one(monkeypat
     res = solve_exact(inst, workers=2, time_limit=60, formulation="assignment")
     assert res.model == "boolean" and res.proven
     assert check_schedule(inst, res.schedule) == []
+
+
+def test_auto_with_roles_solves_the_assignment_model_beside_its_own(monkeypatch):
+    """With roles, "auto" solves its own model and the assignment model side by side (each
+    with half the workers); the answer is the proven one or the shorter, with the better
+    bound of the two; deterministic under a deterministic-time limit with one worker."""
+    import lvws_ros.policies.exact as exact
+    from lvws_ros.core.families import family_instance
+
+    inst = family_instance("traits-roles", 1, 0)
+    alone = solve_exact(inst, workers=2, time_limit=60, formulation="coalition")
+    seen: dict[str, exact.ExpertResult] = {}
+    solve = exact._solve_model
+
+    def spy(inst, state, todo, hint, formulation, run):  # type: ignore[no-untyped-def]
+        assert run.workers == 1
+        seen[formulation] = solve(inst, state, todo, hint, formulation, run)
+        return seen[formulation]
+
+    monkeypatch.setattr(exact, "_solve_model", spy)
+    runs = [solve_exact(inst, workers=2, work=0.2, time_limit=60) for _ in range(2)]
+    assert set(seen) == {"auto", "assignment"}
+    res = runs[0]
+    assert res.schedule.assignments == runs[1].schedule.assignments
+    assert res.makespan == pytest.approx(min(r.makespan for r in seen.values()))
+    assert res.bound == pytest.approx(min(max(r.bound for r in seen.values()), res.makespan))
+    assert res.model in ("coalition", "assignment") and check_schedule(inst, res.schedule) == []
+    seen.clear()
+    roomy = solve_exact(inst, workers=2, time_limit=60)
+    assert roomy.proven and "auto" in seen and alone.proven
+    assert roomy.makespan == pytest.approx(alone.makespan)
+
+
+def test_a_proof_stops_the_model_beside_it():
+    """Solved side by side, a proof stops the other model's search (it returns its best at
+    once, not at its limit), and a model that starts after the proof does not solve."""
+    import threading
+    import time
+
+    import lvws_ros.policies.exact as exact
+    from lvws_ros.core.executor import State
+
+    inst = random_instance(np.random.default_rng(7), 8, 60, "long")
+    state = State.initial(inst)
+    state.refresh()
+    todo = state.tasks_to_do()
+    hint = exact.left_shift(inst, exact.heuristic_schedule(inst, state), state)
+    run = exact._Run(60.0, 1, 0, None, time.perf_counter())
+    out: list[exact.ExpertResult] = []
+    thread = threading.Thread(target=lambda: out.append(exact._solve_model(inst, state, todo, hint, "boolean", run)))
+    thread.start()
+    time.sleep(2.0)
+    run.proved()  # as a model beside it does when it proves
+    thread.join(20.0)
+    assert not thread.is_alive() and time.perf_counter() - run.t_start < 25
+    assert not out[0].proven and check_schedule(inst, out[0].schedule) == []
+    late = exact._solve_model(inst, state, todo, hint, "assignment", run)
+    assert late.status == "unknown" and late.schedule is hint
