@@ -34,9 +34,10 @@ task, by start time, free robots of the pool. :attr:`ExpertResult.model` says wh
 model was solved.
 
 The *assignment model* is the per-robot boolean one with a literal per pair of tasks that
-may overlap (they then share no member), as in Young, Feydy and Schutt's multi-skill model:
-a formulation to choose, not one ``auto`` takes (measured against the coalition model on
-the multi-skill library: ``docs/benchmarks.md``).
+may overlap (they then share no member), as in Young, Feydy and Schutt's multi-skill model.
+With roles its search finds short schedules where the coalition model's does not, and its
+bound is weak; on small teams with roles ``auto`` solves both at the same time
+(:func:`_side_by_side`; measured on the multi-skill library: ``docs/benchmarks.md``).
 
 It also solves from a mid-run :class:`~lvws_ros.core.executor.State`: tasks done or in
 progress stay as they are, busy robots are free only from their given time on, and
@@ -792,8 +793,12 @@ def solve_exact(
     number at most COALITION_LIMIT (on such small teams it proves faster than the pool
     model, measured on Datasets I-III and the mspsp family), else the pool model when
     most robots are interchangeable and there is no travel (:func:`pools_apply`), else
-    the boolean one. The result's ``model`` says which was solved. ``work``: a limit of
-    CP-SAT's deterministic time too (with ``workers`` = 1 the same result on every run)."""
+    the boolean one. With roles on such a small team and two workers or more, "auto" also
+    solves the assignment model at the same time, half the workers each
+    (:func:`_side_by_side`). The result's
+    ``model`` says which model's schedule it is. ``work``: a limit of CP-SAT's
+    deterministic time too (with ``workers`` = 1 the same result on every run; side by
+    side, with 2 as well)."""
     _check_formulation(inst, formulation)
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state.copy()
@@ -804,7 +809,7 @@ def solve_exact(
         sched = schedule_from_state(state, "exact")
         return ExpertResult(sched, "optimal", sched.makespan, sched.makespan, time.perf_counter() - t_start, True)
     run = _Run(time_limit, workers, seed, work, t_start)
-    if formulation == "auto" and _side_by_side_applies(inst, todo):
+    if formulation == "auto" and _side_by_side_applies(inst, todo, workers):
         return _side_by_side(inst, state, todo, hint, run)
     return _solve_model(inst, state, todo, hint, formulation, run)
 
@@ -974,10 +979,14 @@ def _unordered_pairs(inst: Instance, h: _Horizon) -> list[tuple[int, int]]:
     return out
 
 
-def _side_by_side_applies(inst: Instance, todo: list[int]) -> bool:
-    """Whether "auto" solves the assignment model beside its own: a task left has roles,
-    no travel (not measured with it), and the pair literals fit (:func:`_pairs_fit`)."""
-    return inst.travel is None and bool(np.any(inst.task_roles[todo])) and _pairs_fit(inst, todo)
+def _side_by_side_applies(inst: Instance, todo: list[int], workers: int) -> bool:
+    """Whether "auto" solves the assignment model beside its own: two workers or more (one
+    is one thread), a task left has roles, a
+    team small enough for the coalition model (MAX_ENUMERATED robots; on larger teams the
+    pool model with half the workers lost more than the pairs won: docs/benchmarks.md), no
+    travel (not measured with it), and the pair literals fit (:func:`_pairs_fit`)."""
+    return workers >= 2 and inst.travel is None and inst.num_robots <= MAX_ENUMERATED \
+        and bool(np.any(inst.task_roles[todo])) and _pairs_fit(inst, todo)
 
 
 def _pairs_fit(inst: Instance, todo: list[int]) -> bool:

@@ -352,7 +352,8 @@ def test_the_assignment_model_beyond_its_pair_limit_is_the_boolean_one(monkeypat
 def test_auto_with_roles_solves_the_assignment_model_beside_its_own(monkeypatch):
     """With roles, "auto" solves its own model and the assignment model side by side (each
     with half the workers); the answer is the proven one or the shorter, with the better
-    bound of the two; deterministic under a deterministic-time limit with one worker."""
+    bound of the two; deterministic under a deterministic-time limit with two workers; with
+    one worker its own model alone."""
     import lvws_ros.policies.exact as exact
     from lvws_ros.core.families import family_instance
 
@@ -374,6 +375,9 @@ def test_auto_with_roles_solves_the_assignment_model_beside_its_own(monkeypatch)
     assert res.makespan == pytest.approx(min(r.makespan for r in seen.values()))
     assert res.bound == pytest.approx(min(max(r.bound for r in seen.values()), res.makespan))
     assert res.model in ("coalition", "assignment") and check_schedule(inst, res.schedule) == []
+    seen.clear()
+    one = solve_exact(inst, workers=1, time_limit=60)  # one worker: one thread, its own model alone
+    assert set(seen) == {"auto"} and one.model == "coalition"
     seen.clear()
     roomy = solve_exact(inst, workers=2, time_limit=60)
     assert roomy.proven and "auto" in seen and alone.proven
