@@ -308,11 +308,11 @@ def validate_instance(inst: Instance) -> None:
         if len(set(t.after)) != len(t.after):
             raise InstanceError(f"task {t.id!r} after: duplicate prerequisite ids")
     inst.__dict__["topological_order"] = _topological_order(inst)  # prime the cached_property
+    if not isinstance(inst.roles, bool):
+        raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
     _check_coverable(inst)
     if inst.objective not in OBJECTIVES:
         raise InstanceError(f"objective: expected one of {list(OBJECTIVES)}, got {_short(inst.objective)}")
-    if not isinstance(inst.roles, bool):
-        raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
     if inst.departure not in DEPARTURES:
         raise InstanceError(f"departure: expected one of {list(DEPARTURES)}, got {_short(inst.departure)}")
 

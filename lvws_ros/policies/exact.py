@@ -857,7 +857,8 @@ def _side_by_side(inst: Instance, state: State, todo: list[int], hint: Schedule,
     """The "auto" model and the assignment model solved at the same time, each with half the
     workers (at least one), each from ``hint``; a proof by either stops the other. The proven
     answer, else the shorter schedule ("auto"'s on a tie), with the better bound of the two.
-    Where the assignment model fails (an error of its own), "auto"'s answer alone."""
+    Where one model fails with an ExpertError (its solution not covering after rounding),
+    the other's answer alone; any other error is raised, the other model stopped."""
     half = _Run(run.time_limit, max(1, run.workers // 2), run.seed, run.work, run.t_start)
     out: dict[str, ExpertResult] = {}
     errors: dict[str, BaseException] = {}
@@ -865,23 +866,33 @@ def _side_by_side(inst: Instance, state: State, todo: list[int], hint: Schedule,
     def solve(formulation: str) -> None:
         try:
             out[formulation] = _solve_model(inst, state, todo, hint, formulation, half)
-        except BaseException as exc:  # the caller's thread raises it ("auto"'s) or goes on without it
+        except BaseException as exc:  # handed to the caller's thread
             errors[formulation] = exc
-            if formulation == "auto":
+            if not isinstance(exc, ExpertError):
                 half.stop()
 
-    threads = [threading.Thread(target=solve, args=(f,), name=f"exact-{f}") for f in ("assignment", "auto")]
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join()
-    if "auto" in errors:
+    threads = [threading.Thread(target=solve, args=(f,), name=f"exact-{f}", daemon=True)
+               for f in ("assignment", "auto")]
+    try:
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            while thread.is_alive():
+                thread.join(0.1)
+                if half.over:  # a stop given before a solver's search began is lost: give it again
+                    half.stop()
+    except BaseException:
+        half.stop()
+        raise
+    for exc in errors.values():
+        if not isinstance(exc, ExpertError):
+            raise exc
+    if not out:
         raise errors["auto"]
-    if "assignment" in errors:
-        return out["auto"]
+    if len(out) == 1:
+        return next(iter(out.values()))
     first, other = out["auto"], out["assignment"]
-    shorter = (other.makespan or 0) < (first.makespan or 0) - TOLERANCE
-    best = other if not first.proven and (other.proven or shorter) else first
+    best = min((first, other), key=lambda r: (not r.proven, r.makespan, r.status == "unknown", r is other))
     assert best.makespan is not None
     bound = best.makespan if best.proven else min(max(first.bound, other.bound), best.makespan)
     proven = best.proven or (best.exact_scale and bound >= best.makespan - TOLERANCE)
@@ -916,8 +927,6 @@ def _solve_model(inst: Instance, state: State, todo: list[int], hint: Schedule, 
         return ExpertResult(hint, "unknown", hint.makespan, h.lower / h.scale, time.perf_counter() - run.t_start,
                             h.exact_scale, name)
     code = solver.solve(model)
-    if code == cp_model.OPTIMAL:
-        run.proved()
     seconds = time.perf_counter() - run.t_start
     found_one = code in (cp_model.OPTIMAL, cp_model.FEASIBLE)
     bound = float(solver.best_objective_bound) / h.scale if found_one else h.lower / h.scale
@@ -933,6 +942,7 @@ def _solve_model(inst: Instance, state: State, todo: list[int], hint: Schedule, 
     status = "optimal" if code == cp_model.OPTIMAL and h.exact_scale else "feasible"
     if status == "optimal":
         bound = sched.makespan
+        run.proved()  # a model solved beside this one stops
     sched.compute_seconds = seconds
     return ExpertResult(sched, status, sched.makespan, min(bound, sched.makespan), seconds, h.exact_scale, name)
 

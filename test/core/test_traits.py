@@ -166,6 +166,16 @@ def test_roles_that_no_team_can_fill_are_refused():
         instance_from_dict(data)
 
 
+def test_an_instance_roles_that_is_not_a_bool_is_named():
+    """An Instance built in code with a roles that is no bool (a list) is refused by name, before
+    the whole team's coverage is checked with it."""
+    from lvws_ros.core.problem import Instance, Robot, Task
+
+    with pytest.raises(InstanceError, match=re.escape("roles: expected true or false, got [1]")):
+        Instance("x", ("a",), (Robot("r", (1,), 1.0),), (Task("t", (1,), 0.0, 1.0), Task("u", (1,), 0.0, 1.0)),
+                 roles=[1])  # type: ignore[arg-type]
+
+
 def test_a_home_needs_sites():
     data = {"format": "lvws-instance/1", "name": "x", "traits": ["a"],
             "robots": [{"id": "r", "traits": {"a": 1}, "home": "dock"}],

@@ -334,6 +334,10 @@ def test_the_pairs_leave_out_tasks_ordered_by_precedence():
     h.upper += 10  # windows wide enough for any two free tasks to overlap
     names = {(inst.tasks[i].id, inst.tasks[j].id) for i, j in exact._unordered_pairs(inst, h)}
     assert {tuple(sorted(p)) for p in names} == {("a", "d"), ("b", "d"), ("c", "d")}
+    d = inst.task_index["d"]
+    h.head[d] = h.upper - h.tail[inst.task_index["b"]] + 1  # d starts after b's latest end: b, a never beside it
+    names = {(inst.tasks[i].id, inst.tasks[j].id) for i, j in exact._unordered_pairs(inst, h)}
+    assert {tuple(sorted(p)) for p in names} == {("c", "d")}
 
 
 def test_the_assignment_model_beyond_its_pair_limit_is_the_boolean_one(monkeypatch):
@@ -402,10 +406,14 @@ def test_a_proof_stops_the_model_beside_it():
     out: list[exact.ExpertResult] = []
     thread = threading.Thread(target=lambda: out.append(exact._solve_model(inst, state, todo, hint, "boolean", run)))
     thread.start()
-    time.sleep(2.0)
-    run.proved()  # as a model beside it does when it proves
-    thread.join(20.0)
-    assert not thread.is_alive() and time.perf_counter() - run.t_start < 25
-    assert not out[0].proven and check_schedule(inst, out[0].schedule) == []
+    while not run.solvers:  # registered: its search is about to begin
+        time.sleep(0.01)
+    time.sleep(1.0)
+    run.stop()  # as a model beside it does when it proves
+    while thread.is_alive() and time.perf_counter() - run.t_start < 30:
+        thread.join(0.1)
+        run.stop()  # as the side-by-side loop does: a stop before the search began is given again
+    assert not thread.is_alive() and time.perf_counter() - run.t_start < 30
+    assert out[0].status == "feasible" and check_schedule(inst, out[0].schedule) == []
     late = exact._solve_model(inst, state, todo, hint, "assignment", run)
     assert late.status == "unknown" and late.schedule is hint
