@@ -795,10 +795,9 @@ def solve_exact(
     most robots are interchangeable and there is no travel (:func:`pools_apply`), else
     the boolean one. With roles on such a small team and two workers or more, "auto" also
     solves the assignment model at the same time, half the workers each
-    (:func:`_side_by_side`). The result's
-    ``model`` says which model's schedule it is. ``work``: a limit of CP-SAT's
-    deterministic time too (with ``workers`` = 1 the same result on every run; side by
-    side, with 2 as well)."""
+    (:func:`_side_by_side`). The result's ``model`` says which model's schedule it is.
+    ``work``: a limit of CP-SAT's deterministic time too (with ``workers`` = 1 the same
+    result on every run; side by side, with 2 as well)."""
     _check_formulation(inst, formulation)
     t_start = time.perf_counter()
     state = State.initial(inst) if state is None else state.copy()
@@ -909,9 +908,11 @@ def _solve_model(inst: Instance, state: State, todo: list[int], hint: Schedule, 
     h = _horizon(inst, state, todo, hint, coalitions=formulation in ("auto", "coalition"))
     if formulation == "auto" and h.teams is None and pools_apply(inst, state):
         formulation = "pool"  # the horizon without coalitions is the pool model's
+    if formulation == "assignment" and not _pairs_fit(inst, todo):
+        formulation = "boolean"  # too many pair literals: the model without them
     m, found = _hinted_model(inst, state, h, hint, formulation)
     name = "pool" if isinstance(m, _PoolModel) else "coalition" if h.teams is not None else \
-        "assignment" if formulation == "assignment" and _pairs_fit(inst, todo) else "boolean"
+        "assignment" if formulation == "assignment" else "boolean"
     model = m.model
     roles = _slot_cumulatives(model, inst, state, h, m.start)
     solver = cp_model.CpSolver()
@@ -958,7 +959,7 @@ def _hinted_model(inst: Instance, state: State, h: _Horizon, hint: Schedule,
         _hint_pools(inst, h, pm, found, hint)
         return pm, list(found)
     m = _build_model(inst, h) if h.teams is not None else _build_boolean_model(inst, h)
-    if formulation == "assignment" and _pairs_fit(inst, h.todo):
+    if formulation == "assignment":
         _overlap_pairs(m.model, inst, h, m.start, m.member)
     tv = _add_travel(m.model, inst, state, h, m.start, m.member, m.makespan)
     teams = _add_hint(inst, h, m, hint, starts=tv is None)
@@ -991,10 +992,10 @@ def _unordered_pairs(inst: Instance, h: _Horizon) -> list[tuple[int, int]]:
 
 def _side_by_side_applies(inst: Instance, todo: list[int], workers: int) -> bool:
     """Whether "auto" solves the assignment model beside its own: two workers or more (one
-    is one thread), a task left has roles, a
-    team small enough for the coalition model (MAX_ENUMERATED robots; on larger teams the
-    pool model with half the workers lost more than the pairs won: docs/benchmarks.md), no
-    travel (not measured with it), and the pair literals fit (:func:`_pairs_fit`)."""
+    is one thread), a task left has roles, a team small enough for the coalition model
+    (MAX_ENUMERATED robots; on larger teams the pool model with half the workers lost more
+    than the pairs won: docs/benchmarks.md), no travel (not measured with it), and the
+    pair literals fit (:func:`_pairs_fit`)."""
     return workers >= 2 and inst.travel is None and inst.num_robots <= MAX_ENUMERATED \
         and bool(np.any(inst.task_roles[todo])) and _pairs_fit(inst, todo)
 
