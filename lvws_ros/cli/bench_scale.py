@@ -144,6 +144,7 @@ class _SnapshotWire:
 
         self.convert = convert
         self.team_reader, self.graph_reader = convert.TeamReader(), convert.GraphReader()
+        self.checked: Any = None  # a graph that passed the checks before the node's core saw one
 
     def send(self, team: Any, graph: Any) -> Any:
         """The messages of this state (the world's work), and the node's reading of them."""
@@ -174,6 +175,7 @@ class _ChangeWire(_SnapshotWire):
                 first_team, first_graph = first()
                 follower.resync(first_team, first_graph, 0)
                 assert follower.cell is not None
+                self.checked = follower.cell.graph_base  # as the scheduler node offers it
                 return follower.cell.snapshots()
         else:
             self.seq += 1
@@ -222,7 +224,7 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
         t0 = time.perf_counter()
         team, graph = read()
         online.offer_team(team)
-        online.offer_graph(graph)
+        online.offer_graph(graph, wire.checked)
         fallbacks = getattr(online.policy, "fallbacks", 0)
         d = online.decide(started=t0)  # the budget counts from the messages' arrival, as in the node
         seconds = time.perf_counter() - t0

@@ -192,22 +192,19 @@ def _changed(items: Sequence[Any], before: Sequence[Any]) -> list[int]:
 
 def check_graph(snap: GraphSnapshot, checked: GraphSnapshot | None = None) -> None:
     """InstanceError naming the TaskGraph field when the snapshot cannot be used.
-    ``checked``: a snapshot that passed before; with the same task ids, traits and sites,
-    its tasks that ``snap`` holds at the same places (the very same objects) are not
-    checked again."""
+    ``checked``: a snapshot that passed before; with the same traits and sites, its tasks
+    that ``snap`` holds (the very same objects, wherever they are) are not checked again,
+    and a cycle is looked for among the new tasks only unless a known task waits on more
+    than it did (:func:`_unchanged`)."""
     _finite(snap.stamp, "TaskGraph header.stamp", high=math.inf)
     ids = {t.id for t in snap.tasks}
     if len(ids) != len(snap.tasks) or "" in ids:
         raise InstanceError("TaskGraph tasks: ids must be unique and non-empty")
     if checked is not None and (checked.capability_names, checked.trait_names, checked.sites, checked.distances) \
-            == (snap.capability_names, snap.trait_names, snap.sites, snap.distances) \
-            and len(checked.tasks) == len(snap.tasks):
-        changed = _changed(snap.tasks, checked.tasks)
-        if any(snap.tasks[n].id != checked.tasks[n].id for n in changed):
-            changed = list(range(len(snap.tasks)))  # tasks came and went: every prerequisite looked up again
-        structure_same = all(snap.tasks[n].prerequisites == checked.tasks[n].prerequisites for n in changed)
+            == (snap.capability_names, snap.trait_names, snap.sites, snap.distances):
+        changed, cycles_among = _unchanged(snap, checked, ids)
     else:
-        changed, structure_same = list(range(len(snap.tasks))), False
+        changed, cycles_among = list(range(len(snap.tasks))), None
     for n in changed:
         check_task(snap, n, snap.tasks[n], ids)
     if snap.objective not in ("", *OBJECTIVES):
@@ -215,8 +212,34 @@ def check_graph(snap: GraphSnapshot, checked: GraphSnapshot | None = None) -> No
     if snap.departure not in ("", *DEPARTURES):
         raise InstanceError(f"TaskGraph departure: '', 'together' or 'each', got {snap.departure[:40]!r}")
     _check_sites(snap, changed)
-    if not structure_same:
+    if cycles_among is None:
         check_acyclic(tuple((t.id, tuple(t.prerequisites)) for t in snap.tasks))
+    elif cycles_among:
+        check_acyclic(tuple(sorted((t.id, tuple(p for p in t.prerequisites if p in cycles_among))
+                                   for t in snap.tasks if t.id in cycles_among)))
+
+
+def _unchanged(snap: GraphSnapshot, checked: GraphSnapshot, ids: set[str]) -> tuple[list[int], set[str] | None]:
+    """For :func:`check_graph` against ``checked``: the places of ``snap``'s tasks to check
+    (those ``checked`` does not hold as the very same object; with tasks gone, also those
+    naming one), and the ids among which a cycle may be (the new ones; None: anywhere).
+    A cycle through a known task whose prerequisites are among those it had goes on
+    through known tasks only, by edges ``checked`` had: it would have been found there."""
+    before = {t.id: t for t in checked.tasks}
+    changed = [n for n, t in enumerate(snap.tasks) if before.get(t.id) is not t]
+    if len(snap.tasks) - len(changed) < len(before):  # tasks gone: those that still name one are checked
+        gone = {k for k in before if k not in ids}
+        named = {n for n, t in enumerate(snap.tasks) if not gone.isdisjoint(t.prerequisites)}
+        changed = sorted(named.union(changed))
+    new: set[str] = set()
+    for n in changed:
+        t = snap.tasks[n]
+        old = before.get(t.id)
+        if old is None:
+            new.add(t.id)
+        elif not set(t.prerequisites) <= set(old.prerequisites):
+            return changed, None
+    return changed, new
 
 
 def check_task(snap: GraphSnapshot, n: int, t: TaskInfo, ids: Container[str]) -> None:
@@ -241,6 +264,8 @@ def check_task(snap: GraphSnapshot, n: int, t: TaskInfo, ids: Container[str]) ->
     unknown = [p for p in t.prerequisites if p not in ids]
     if unknown:
         raise InstanceError(f"{where}.prerequisites: unknown task id(s) {unknown}")
+    if len(set(t.prerequisites)) != len(t.prerequisites):
+        raise InstanceError(f"{where}.prerequisites: an id given twice")
     for name, value in (("start_time", t.start), ("end_time", t.end)):
         if value is not None:
             _finite(value, f"{where}.{name}", high=math.inf)
@@ -304,8 +329,10 @@ def roles_code(roles: bool | None) -> int:
     return 0 if roles is None else 1 + int(roles)
 
 
-def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online") -> Instance:
-    """The scheduling instance the snapshots describe (InstanceError on bad content)."""
+def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online", checked: bool = False) -> Instance:
+    """The scheduling instance the snapshots describe (InstanceError on bad content).
+    ``checked``: both passed :func:`check_team` and :func:`check_graph` (the graph, or
+    the one it is a view of): each robot and task is not checked again."""
     if tuple(team.capability_names) != tuple(graph.capability_names):
         raise InstanceError(f"team capabilities {list(team.capability_names)} differ from the task graph's "
                             f"{list(graph.capability_names)}")
@@ -326,7 +353,7 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
         raise InstanceError(f"TeamState robots ({homes[0]!r}).home: a home needs the TaskGraph's sites")
     return Instance(name, tuple(graph.capability_names), robots, tasks, travel=travel, traits=traits,
                     objective=graph.objective or "makespan", roles=bool(graph.roles),
-                    departure=graph.departure or "together")
+                    departure=graph.departure or "together", items_checked=checked)
 
 
 def off_site(robot: RobotInfo) -> str:
@@ -681,9 +708,11 @@ class OnlineScheduler:
         self.team = snap
         return True
 
-    def offer_graph(self, snap: GraphSnapshot) -> bool:
-        """Take a task-graph snapshot (InstanceError, snapshot ignored, when malformed)."""
-        check_graph(snap, self.graph)
+    def offer_graph(self, snap: GraphSnapshot, checked: GraphSnapshot | None = None) -> bool:
+        """Take a task-graph snapshot (InstanceError, snapshot ignored, when malformed).
+        ``checked``: one that passed :func:`check_graph` elsewhere (a ChangeFollower's),
+        for the first snapshot: its tasks are not checked again."""
+        check_graph(snap, self.graph if self.graph is not None else checked)
         if not self._in_order("TaskGraph", self.graph.stamp if self.graph else None, snap.stamp):
             return False
         if self.graph is not None:
@@ -734,7 +763,7 @@ class OnlineScheduler:
                                     f"with {len(held) - len(first)} task(s) waiting on them until robots come back")
         self._view = view
         if key != self._key or self._inst is None:
-            self._inst = build_instance(self.team, view)
+            self._inst = build_instance(self.team, view, checked=True)  # both were checked when offered
             self._key = key
             self._main_refused = ""
             try:
@@ -793,7 +822,7 @@ class OnlineScheduler:
         """The instance :meth:`instance` would give, built without touching the scheduler
         (a policy can be checked against it while another thread decides)."""
         assert self.team is not None and self.graph is not None
-        return build_instance(self.team, scheduling_view(self.team, self.graph)[0])
+        return build_instance(self.team, scheduling_view(self.team, self.graph)[0], checked=True)
 
     def decide_state(self, state: State, started: float | None = None) -> OnlineDecision:
         """Run the policy on ``state`` (checked against Eqs. 8-11) and name the result

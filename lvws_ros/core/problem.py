@@ -13,7 +13,7 @@ import graphlib
 import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 from functools import cached_property
 from typing import Any
 
@@ -75,9 +75,12 @@ class Instance:
     objective: str = "makespan"  # "return": the makespan ends when the last robot is home
     roles: bool = False  # the default of each task's ``roles``
     departure: str = "together"  # DEPARTURES: "each" lets a task be given to busy robots, who set out when free
+    # True: each robot and task was checked already (built from snapshots that passed
+    # online.check_team / check_graph); the whole instance is still checked
+    items_checked: InitVar[bool] = False
 
-    def __post_init__(self) -> None:
-        validate_instance(self)
+    def __post_init__(self, items_checked: bool) -> None:
+        validate_instance(self, items=not items_checked)
 
     @property
     def num_robots(self) -> int:
@@ -259,8 +262,9 @@ def _check_vector(vec: Any, k: int, what: str) -> None:
         raise InstanceError(f"{what} must hold only 0 or 1, got {_short(list(vec))}")
 
 
-def validate_instance(inst: Instance) -> None:
-    """Raise InstanceError naming every kind of problem of section 'Problem instance'."""
+def validate_instance(inst: Instance, items: bool = True) -> None:
+    """Raise InstanceError naming every kind of problem of section 'Problem instance'
+    (``items`` False: each robot and task on its own was checked before; the rest is)."""
     k = len(inst.capabilities)
     if not all(isinstance(c, str) and c for c in inst.capabilities):
         raise InstanceError(f"capabilities: names must be non-empty strings, got {_short(list(inst.capabilities))}")
@@ -283,6 +287,21 @@ def validate_instance(inst: Instance) -> None:
         bad = [inst.robots[r].id for r, v in enumerate(tr.robot_speed) if v != 0 and not 1 / MAX_VALUE <= v <= MAX_VALUE]
         if bad:
             raise InstanceError(f"robot {bad[0]!r} speed: must be between {1 / MAX_VALUE:g} and {MAX_VALUE:g}")
+    if items:
+        _check_items(inst)
+    inst.__dict__["topological_order"] = _topological_order(inst)  # prime the cached_property
+    if not isinstance(inst.roles, bool):
+        raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
+    _check_coverable(inst)
+    if inst.objective not in OBJECTIVES:
+        raise InstanceError(f"objective: expected one of {list(OBJECTIVES)}, got {_short(inst.objective)}")
+    if inst.departure not in DEPARTURES:
+        raise InstanceError(f"departure: expected one of {list(DEPARTURES)}, got {_short(inst.departure)}")
+
+
+def _check_items(inst: Instance) -> None:
+    """Each robot and task on its own: capabilities, traits, numbers, prerequisites."""
+    k = len(inst.capabilities)
     for r in inst.robots:
         _check_vector(r.capabilities, k, f"robot {r.id!r} capabilities")
         _check_number(r.payload, f"robot {r.id!r} payload", positive=not inst.traits)
@@ -307,14 +326,6 @@ def validate_instance(inst: Instance) -> None:
             raise InstanceError(f"task {t.id!r} after: a task cannot be its own prerequisite")
         if len(set(t.after)) != len(t.after):
             raise InstanceError(f"task {t.id!r} after: duplicate prerequisite ids")
-    inst.__dict__["topological_order"] = _topological_order(inst)  # prime the cached_property
-    if not isinstance(inst.roles, bool):
-        raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
-    _check_coverable(inst)
-    if inst.objective not in OBJECTIVES:
-        raise InstanceError(f"objective: expected one of {list(OBJECTIVES)}, got {_short(inst.objective)}")
-    if inst.departure not in DEPARTURES:
-        raise InstanceError(f"departure: expected one of {list(DEPARTURES)}, got {_short(inst.departure)}")
 
 
 def _check_coverable(inst: Instance) -> None:

@@ -22,7 +22,7 @@ instance validation, the network's pair features) asks :func:`shortfall`,
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -59,6 +59,7 @@ IntArray = npt.NDArray[np.int64]
 TOLERANCE = 1e-6
 MAX_ENUMERATED = 16  # minimal_subteams (the exact expert's coalition model, tests) lists subsets of at most this
 SEED_EVERY_HOLDER = 8  # lightest_cover seeds with every capability holder up to this many candidates
+MASK_BITS = 62  # lightest_cover takes capabilities as the bits of an int64 up to this many, else arrays
 
 
 def shortfall(team_caps: npt.ArrayLike, team_payload: npt.ArrayLike, need_caps: npt.ArrayLike,
@@ -422,9 +423,21 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
     for n candidates and teams of t. A minimum-weight cover is NP-hard; this finds the
     lightest minimal subteam in 99.3 % of random small cases (a test holds it to 95 %),
     and GRP's makespans on the first 200 / 600 test instances of Datasets I / II equal
-    those of the former exhaustive search in every schedule."""
+    those of the former exhaustive search in every schedule. With 0/1 capabilities and
+    whole payloads (and at most MASK_BITS capabilities), the same steps in plain Python
+    over the kinds of robot (:class:`_WholeCover`, a test holds the answers equal);
+    otherwise in arrays."""
     if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload, roles):
         return None
+    if not roles and traits_from is None and np.shape(caps)[1] <= MASK_BITS \
+            and _whole_numbers(caps, payloads, need_caps, need_payload):
+        return _WholeCover(caps, payloads, need_caps, need_payload).lightest()
+    return _array_cover(caps, payloads, need_caps, need_payload, roles, traits_from)
+
+
+def _array_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,
+                 roles: bool, traits_from: int | None) -> tuple[int, ...]:
+    """:func:`lightest_cover` over candidates that cover, in arrays (any amounts)."""
     options: list[list[int]] = []
     alone = [int(i) for i in np.flatnonzero(covers_alone(caps, payloads, need_caps[None, :], need_payload, roles))]
     if alone and traits_from is None:
@@ -466,6 +479,154 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
 
     best = min(options, key=lambda t: (float(payloads[t].sum()), round(surplus(t), 9), len(t), sorted(t)))
     return tuple(sorted(best))
+
+
+def _whole_numbers(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float) -> bool:
+    """0/1 capabilities and whole payloads (below 2^52): every sum :func:`lightest_cover`
+    forms is exact in any order, so :class:`_WholeCover` gives its very answer."""
+    caps, need = np.asarray(caps), np.asarray(need_caps)
+    if not (((caps == 0) | (caps == 1)).all() and ((need == 0) | (need == 1)).all()):
+        return False
+    values = np.append(np.asarray(payloads, dtype=np.float64), need_payload)
+    return bool(np.isfinite(values).all() and (np.abs(values) < 2.0 ** 52).all() and (values == np.round(values)).all())
+
+
+def _parts(items: IntArray, starts: IntArray) -> list[list[int]]:
+    """``items`` cut before each of the places ``starts`` (the first is 0), as lists."""
+    flat, ends = items.tolist(), [*starts.tolist()[1:], len(items)]
+    return [flat[a:b] for a, b in zip(starts.tolist(), ends, strict=True)]
+
+
+class _WholeCover:
+    """:func:`lightest_cover`'s construction step by step in plain Python over the kinds
+    of robot (the same capabilities and payload), for 0/1 capabilities and whole payloads
+    (:func:`_whole_numbers`): each step takes the first robot of an order where a kind's
+    copies are ties broken by index, as the array version does, at a cost per kind, not
+    per candidate."""
+
+    def __init__(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float) -> None:
+        caps, payloads = np.asarray(caps), np.asarray(payloads, dtype=np.float64)
+        n, k = caps.shape
+        weights = np.int64(1) << np.arange(k, dtype=np.int64)
+        bits = (caps > 0).astype(np.int64) @ weights
+        self.need = int((np.asarray(need_caps) > TOLERANCE).astype(np.int64) @ weights)
+        self.need_payload = float(need_payload)
+        self.mask, self.payload = bits.tolist(), payloads.tolist()
+        light = np.argsort(payloads, kind="stable")  # the lightest first, lower index on ties
+        values, of_value = np.unique(payloads[light], return_index=True)
+        self.lightest_first = _parts(light, of_value)  # per payload, by index
+        kind = bits[light] * len(values) + np.searchsorted(values, payloads[light])
+        order = light[np.argsort(kind, kind="stable")]  # by kind, each kind's copies by index
+        _, first = np.unique(kind[np.argsort(kind, kind="stable")], return_index=True)
+        copies = _parts(order, first)
+        # the kinds, the lightest first (then by their first copy): (payload, bits, copies)
+        self.kinds = sorted(((self.payload[c[0]], self.mask[c[0]], c) for c in copies), key=lambda x: (x[0], x[2][0]))
+        self.seed_every = n <= SEED_EVERY_HOLDER
+        self.n = n
+
+    def _covers(self, team: list[int]) -> bool:
+        got, total = 0, 0.0
+        for i in team:
+            got |= self.mask[i]
+            total += self.payload[i]
+        return got & self.need == self.need and self.need_payload - total <= TOLERANCE
+
+    def _first(self, used: set[int], match: Callable[..., bool], heaviest: bool = False) -> int | None:
+        """The first robot not ``used`` whose kind ``match`` takes (bits, payload): the
+        lightest (``heaviest``: the heaviest), then the lowest index."""
+        best: tuple[float, int] | None = None
+        for payload, bits, copies in reversed(self.kinds) if heaviest else self.kinds:
+            if best is not None and payload != best[0]:
+                break  # the kinds further on are heavier (lighter)
+            if match(bits, payload):
+                i = next((c for c in copies if c not in used), None)
+                if i is not None and (best is None or i < best[1]):
+                    best = (payload, i)
+        return None if best is None else best[1]
+
+    def _grow(self, start: list[int]) -> list[int] | None:
+        team, used = list(start), set(start)
+        got = 0
+        for i in team:
+            got |= self.mask[i]
+        missing = self.need & ~got
+        while missing:
+            top = max((bin(bits & missing).count("1") for _, bits, copies in self.kinds
+                       if bits & missing and (copies[0] not in used or any(c not in used for c in copies))), default=0)
+            if top <= 0:
+                return None
+            pick = self._first(used, lambda bits, payload, m=missing, g=top: bin(bits & m).count("1") == g)
+            assert pick is not None
+            team.append(pick)
+            used.add(pick)
+            missing &= ~self.mask[pick]
+        return team
+
+    def _fill(self, start: list[int], fill: str) -> list[int] | None:
+        team, used = list(start), set(start)
+        total = sum(self.payload[i] for i in team)
+        if fill == "ascending":
+            for robots in self.lightest_first:
+                for i in robots:
+                    if self.need_payload - total <= TOLERANCE:
+                        return team
+                    if i not in used:
+                        team.append(i)
+                        total += self.payload[i]
+            return team if self.need_payload - total <= TOLERANCE else None
+        while self.need_payload - total > TOLERANCE:
+            if len(used) == self.n:
+                return None
+            short = self.need_payload - total
+            pick = self._first(used, lambda bits, payload, s=short: payload >= s - TOLERANCE)
+            if pick is None:  # none fills it alone: the heaviest
+                pick = self._first(used, lambda bits, payload: True, heaviest=True)
+            assert pick is not None
+            team.append(pick)
+            used.add(pick)
+            total += self.payload[pick]
+        return team
+
+    def _prune(self, team: list[int]) -> list[int]:
+        out = list(team)
+        for q in team:
+            if len(out) > 1:
+                rest = [x for x in out if x != q]
+                if self._covers(rest):
+                    out = rest
+        return out
+
+    def _seeds(self) -> list[int | None]:
+        if self.seed_every:  # every holder of a needed capability
+            return [None, *(i for i in range(self.n) if self.mask[i] & self.need)]
+        seeds: list[int | None] = [None]
+        for c in range(self.need.bit_length()):
+            if self.need >> c & 1:
+                pick = self._first(set(), lambda bits, payload, c=c: bool(bits >> c & 1))
+                if pick is not None:
+                    seeds.append(pick)
+        return seeds
+
+    def lightest(self) -> tuple[int, ...]:
+        """The subteam :func:`lightest_cover` gives (the candidates cover)."""
+        options: list[list[int]] = []
+        alone = self._first(set(), lambda bits, payload: bits & self.need == self.need
+                            and self.need_payload - payload <= TOLERANCE)
+        if alone is not None:
+            options.append([alone])
+        pruned: dict[tuple[int, ...], list[int]] = {}
+        for seed in dict.fromkeys(self._seeds()):
+            core = self._grow([] if seed is None else [seed])
+            for fill in ("single", "ascending"):
+                team = None if core is None else self._fill(core, fill)
+                if team is not None:
+                    key = tuple(sorted(team, key=lambda i: (-self.payload[i], i)))
+                    if key not in pruned:
+                        pruned[key] = self._prune(list(key))
+                    options.append(pruned[key])
+        best = min(dict.fromkeys(tuple(t) for t in options),
+                   key=lambda t: (sum(self.payload[i] for i in t), len(t), sorted(t)))
+        return tuple(sorted(best))
 
 
 def random_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,

@@ -430,7 +430,7 @@ class SchedulerNode(LifecycleNode):
             return
         team, graph = cell.snapshots()
         self.offer("TeamState", lambda: core.offer_team(team))
-        self.offer("TaskGraph", lambda: core.offer_graph(graph))
+        self.offer("TaskGraph", lambda: core.offer_graph(graph, cell.graph_base))  # the base: checked at resync
 
     def resynced(self, res: Any) -> None:
         """The world's answer to a resync request (``None``: the call failed)."""

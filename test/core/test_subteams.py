@@ -212,3 +212,27 @@ def test_the_ascending_payload_fill_adds_the_lightest_robots_one_by_one(payloads
         team = [*team, min(rest, key=lambda i: (pay[i], i))]
     caps = np.ones((n, 1))
     assert grow(caps, pay, np.zeros(1), need, start, fill="ascending") == got  # no trait needed
+
+
+@settings(max_examples=500, deadline=None, derandomize=True)
+@given(n=st.integers(1, 60), k=st.integers(1, 4), kinds=st.integers(1, 12), need_payload=st.integers(0, 40),
+       zero=st.booleans(), seed=st.integers(0, 10_000))
+def test_with_whole_payloads_the_kinds_give_the_arrays_answer(n, k, kinds, need_payload, zero, seed):
+    """lightest_cover's construction in plain Python over the kinds of robot (0/1
+    capabilities, whole payloads) gives the subteam its array version gives, on teams
+    with many copies of a kind, robots carrying nothing, up to and beyond
+    SEED_EVERY_HOLDER candidates."""
+    from lvws_ros.core.subteams import _array_cover, _WholeCover
+
+    rng = np.random.default_rng(seed)
+    kind_caps = rng.random((kinds, k)) < rng.random()
+    kind_payload = rng.integers(0 if zero else 1, 9, kinds).astype(float)
+    pick = rng.integers(0, kinds, n)
+    caps, payloads = kind_caps[pick].astype(float), kind_payload[pick]
+    need = (rng.random(k) < 0.5).astype(float)
+    if not need.any() and need_payload == 0:
+        need[0] = 1.0
+    if not covers(caps, payloads, need, float(need_payload)):
+        return
+    assert _WholeCover(caps, payloads, need, float(need_payload)).lightest() == \
+        _array_cover(caps, payloads, need, float(need_payload), False, None)

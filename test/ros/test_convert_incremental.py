@@ -175,3 +175,40 @@ def test_a_bad_robot_is_refused_when_checked_against_a_good_team() -> None:
             check_team(dataclasses.replace(good, robots=(good.robots[0], bad, *good.robots[2:])), good)
     with pytest.raises(InstanceError, match="capabilities"):  # the same robots under other capability names
         check_team(dataclasses.replace(good, capability_names=("arm",)), good)
+
+
+def _verdict(g: GraphSnapshot, checked: GraphSnapshot | None = None) -> str:
+    try:
+        check_graph(g, checked)
+    except InstanceError as exc:
+        return str(exc).split(":")[0]
+    return "ok"
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.integers(0, 9), st.integers(0, 9), st.integers(0, 3)), min_size=1, max_size=8),
+       st.permutations(range(6)))
+def test_checked_against_a_good_graph_the_verdict_is_the_full_checks(edits: list[tuple[int, int, int]],
+                                                                     order: list[int]) -> None:
+    """Against a graph that passed, only new and changed tasks are checked and a cycle is
+    looked for among the new ones unless a known task waits on more: the same verdict as
+    checking everything, whatever tasks come, go, move or wait on each other (a task
+    cancelled and added again under its id, cycles through known tasks included)."""
+    good = graph()
+    check_graph(good)
+    tasks = {t.id: t for t in good.tasks}
+    for a, b, kind in edits:
+        ta, tb = f"t{a}", f"t{b}"
+        if kind == 0:  # a task (new, or a known one again) waiting on another
+            base = tasks.get(ta, task(a))
+            tasks[ta] = dataclasses.replace(base, prerequisites=(*base.prerequisites, tb))
+        elif kind == 1:  # a task cancelled
+            tasks.pop(ta, None)
+        elif kind == 2:  # a known task waiting on less
+            if ta in tasks:
+                tasks[ta] = dataclasses.replace(tasks[ta], prerequisites=tasks[ta].prerequisites[1:])
+        else:  # a new task, waiting on nothing
+            tasks.setdefault(ta, task(a))
+    kept = [tasks[f"t{j}"] for j in order if f"t{j}" in tasks]  # the known ones moved about
+    now = dataclasses.replace(good, tasks=(*kept, *(t for k, t in tasks.items() if t not in kept)))
+    assert _verdict(now, good) == _verdict(now)
