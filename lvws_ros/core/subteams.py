@@ -22,6 +22,7 @@ instance validation, the network's pair features) asks :func:`shortfall`,
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -34,6 +35,7 @@ __all__ = [
     "TOLERANCE",
     "AmountArray",
     "BoolArray",
+    "CoverPool",
     "FloatArray",
     "covered",
     "covers",
@@ -47,6 +49,7 @@ __all__ = [
     "shortfall",
     "shortlist",
     "team_candidates",
+    "whole_numbers",
 ]
 
 BoolArray = npt.NDArray[np.bool_]
@@ -425,13 +428,14 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
     and GRP's makespans on the first 200 / 600 test instances of Datasets I / II equal
     those of the former exhaustive search in every schedule. With 0/1 capabilities and
     whole payloads (and at most MASK_BITS capabilities), the same steps in plain Python
-    over the kinds of robot (:class:`_WholeCover`, a test holds the answers equal);
+    over the kinds of robot (:class:`CoverPool`, a test holds the answers equal);
     otherwise in arrays."""
     if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload, roles):
         return None
-    if not roles and traits_from is None and np.shape(caps)[1] <= MASK_BITS \
-            and _whole_numbers(caps, payloads, need_caps, need_payload):
-        return _WholeCover(caps, payloads, need_caps, need_payload).lightest()
+    if not roles and traits_from is None and whole_numbers(caps, payloads):
+        pool = CoverPool(caps, payloads)
+        if pool.serves(need_caps, need_payload):
+            return pool.lightest(need_caps, need_payload)
     return _array_cover(caps, payloads, need_caps, need_payload, roles, traits_from)
 
 
@@ -481,13 +485,14 @@ def _array_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray
     return tuple(sorted(best))
 
 
-def _whole_numbers(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float) -> bool:
-    """0/1 capabilities and whole payloads (below 2^52): every sum :func:`lightest_cover`
-    forms is exact in any order, so :class:`_WholeCover` gives its very answer."""
-    caps, need = np.asarray(caps), np.asarray(need_caps)
-    if not (((caps == 0) | (caps == 1)).all() and ((need == 0) | (need == 1)).all()):
+def whole_numbers(caps: AmountArray, payloads: FloatArray) -> bool:
+    """0/1 capabilities (at most MASK_BITS) and whole payloads (below 2^52): every sum
+    :func:`lightest_cover` forms is exact in any order, so :class:`CoverPool` gives its
+    very answer (for tasks whose needs are whole too: :meth:`CoverPool.serves`)."""
+    caps = np.asarray(caps)
+    if caps.ndim != 2 or caps.shape[1] > MASK_BITS or not ((caps == 0) | (caps == 1)).all():
         return False
-    values = np.append(np.asarray(payloads, dtype=np.float64), need_payload)
+    values = np.asarray(payloads, dtype=np.float64)
     return bool(np.isfinite(values).all() and (np.abs(values) < 2.0 ** 52).all() and (values == np.round(values)).all())
 
 
@@ -497,32 +502,80 @@ def _parts(items: IntArray, starts: IntArray) -> list[list[int]]:
     return [flat[a:b] for a, b in zip(starts.tolist(), ends, strict=True)]
 
 
-class _WholeCover:
-    """:func:`lightest_cover`'s construction step by step in plain Python over the kinds
-    of robot (the same capabilities and payload), for 0/1 capabilities and whole payloads
-    (:func:`_whole_numbers`): each step takes the first robot of an order where a kind's
+class CoverPool:
+    """Candidates as kinds of robot (the same capabilities and payload), for 0/1
+    capabilities and whole payloads (:func:`_whole_numbers`): :meth:`lightest` gives
+    :func:`lightest_cover`'s answer built step by step in plain Python, and robots that
+    are given a task :meth:`remove`, so GRP asks task after task without building it
+    again. Each step of the construction takes the first robot of an order where a kind's
     copies are ties broken by index, as the array version does, at a cost per kind, not
-    per candidate."""
+    per candidate. Robots are named by their places in the arrays it was made from."""
 
-    def __init__(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float) -> None:
+    def __init__(self, caps: AmountArray, payloads: FloatArray) -> None:
         caps, payloads = np.asarray(caps), np.asarray(payloads, dtype=np.float64)
-        n, k = caps.shape
-        weights = np.int64(1) << np.arange(k, dtype=np.int64)
-        bits = (caps > 0).astype(np.int64) @ weights
-        self.need = int((np.asarray(need_caps) > TOLERANCE).astype(np.int64) @ weights)
-        self.need_payload = float(need_payload)
+        k = caps.shape[1]
+        self.weights = np.int64(1) << np.arange(k, dtype=np.int64)
+        bits = (caps > 0).astype(np.int64) @ self.weights
         self.mask, self.payload = bits.tolist(), payloads.tolist()
         light = np.argsort(payloads, kind="stable")  # the lightest first, lower index on ties
         values, of_value = np.unique(payloads[light], return_index=True)
         self.lightest_first = _parts(light, of_value)  # per payload, by index
         kind = bits[light] * len(values) + np.searchsorted(values, payloads[light])
-        order = light[np.argsort(kind, kind="stable")]  # by kind, each kind's copies by index
-        _, first = np.unique(kind[np.argsort(kind, kind="stable")], return_index=True)
-        copies = _parts(order, first)
+        by_kind = np.argsort(kind, kind="stable")
+        _, first = np.unique(kind[by_kind], return_index=True)
+        copies = _parts(light[by_kind], first)  # each kind's copies by index
         # the kinds, the lightest first (then by their first copy): (payload, bits, copies)
         self.kinds = sorted(((self.payload[c[0]], self.mask[c[0]], c) for c in copies), key=lambda x: (x[0], x[2][0]))
-        self.seed_every = n <= SEED_EVERY_HOLDER
-        self.n = n
+        of_payload = {self.payload[g[0]]: g for g in self.lightest_first}
+        self.group = {i: (copies, of_payload[payload]) for payload, _, copies in self.kinds for i in copies}
+        self.n = len(payloads)
+        self.total = float(sum(self.payload))
+        self.need, self.need_payload = 0, 0.0
+
+    def serves(self, need_caps: AmountArray, need_payload: float) -> bool:
+        """Whether the task's needs are 0/1 capabilities and a whole payload."""
+        need = np.asarray(need_caps)
+        return bool(((need == 0) | (need == 1)).all() and math.isfinite(need_payload)
+                    and float(need_payload).is_integer() and abs(need_payload) < 2.0 ** 52)
+
+    def remove(self, team: Sequence[int]) -> None:
+        """The robots ``team`` leave the candidates."""
+        for i in team:
+            copies, group = self.group.pop(i)
+            copies.remove(i)
+            group.remove(i)
+            self.n -= 1
+            self.total -= self.payload[i]
+
+    def lightest(self, need_caps: AmountArray, need_payload: float) -> tuple[int, ...] | None:
+        """:func:`lightest_cover`'s subteam of the candidates left, or None (the task's
+        needs: :meth:`serves`)."""
+        self.need = int((np.asarray(need_caps) > TOLERANCE).astype(np.int64) @ self.weights)
+        self.need_payload = float(need_payload)
+        got = 0
+        for _, bits, copies in self.kinds:
+            if copies:
+                got |= bits
+        if not self.n or got & self.need != self.need or self.need_payload - self.total > TOLERANCE:
+            return None
+        options: list[list[int]] = []
+        alone = self._first(set(), lambda bits, payload: bits & self.need == self.need
+                            and self.need_payload - payload <= TOLERANCE)
+        if alone is not None:
+            options.append([alone])
+        pruned: dict[tuple[int, ...], list[int]] = {}
+        for seed in dict.fromkeys(self._seeds()):
+            core = self._grow([] if seed is None else [seed])
+            for fill in ("single", "ascending"):
+                team = None if core is None else self._fill(core, fill)
+                if team is not None:
+                    key = tuple(sorted(team, key=lambda i: (-self.payload[i], i)))
+                    if key not in pruned:
+                        pruned[key] = self._prune(list(key))
+                    options.append(pruned[key])
+        best = min(dict.fromkeys(tuple(t) for t in options),
+                   key=lambda t: (sum(self.payload[i] for i in t), len(t), sorted(t)))
+        return tuple(sorted(best))
 
     def _covers(self, team: list[int]) -> bool:
         got, total = 0, 0.0
@@ -532,13 +585,13 @@ class _WholeCover:
         return got & self.need == self.need and self.need_payload - total <= TOLERANCE
 
     def _first(self, used: set[int], match: Callable[..., bool], heaviest: bool = False) -> int | None:
-        """The first robot not ``used`` whose kind ``match`` takes (bits, payload): the
-        lightest (``heaviest``: the heaviest), then the lowest index."""
+        """The first candidate not ``used`` whose kind ``match`` takes (bits, payload):
+        the lightest (``heaviest``: the heaviest), then the lowest index."""
         best: tuple[float, int] | None = None
         for payload, bits, copies in reversed(self.kinds) if heaviest else self.kinds:
             if best is not None and payload != best[0]:
                 break  # the kinds further on are heavier (lighter)
-            if match(bits, payload):
+            if copies and match(bits, payload):
                 i = next((c for c in copies if c not in used), None)
                 if i is not None and (best is None or i < best[1]):
                     best = (payload, i)
@@ -552,7 +605,8 @@ class _WholeCover:
         missing = self.need & ~got
         while missing:
             top = max((bin(bits & missing).count("1") for _, bits, copies in self.kinds
-                       if bits & missing and (copies[0] not in used or any(c not in used for c in copies))), default=0)
+                       if bits & missing and copies and (copies[0] not in used or any(c not in used for c in copies))),
+                      default=0)
             if top <= 0:
                 return None
             pick = self._first(used, lambda bits, payload, m=missing, g=top: bin(bits & m).count("1") == g)
@@ -597,8 +651,8 @@ class _WholeCover:
         return out
 
     def _seeds(self) -> list[int | None]:
-        if self.seed_every:  # every holder of a needed capability
-            return [None, *(i for i in range(self.n) if self.mask[i] & self.need)]
+        if self.n <= SEED_EVERY_HOLDER:  # every holder of a needed capability
+            return [None, *sorted(i for _, bits, copies in self.kinds if bits & self.need for i in copies)]
         seeds: list[int | None] = [None]
         for c in range(self.need.bit_length()):
             if self.need >> c & 1:
@@ -606,27 +660,6 @@ class _WholeCover:
                 if pick is not None:
                     seeds.append(pick)
         return seeds
-
-    def lightest(self) -> tuple[int, ...]:
-        """The subteam :func:`lightest_cover` gives (the candidates cover)."""
-        options: list[list[int]] = []
-        alone = self._first(set(), lambda bits, payload: bits & self.need == self.need
-                            and self.need_payload - payload <= TOLERANCE)
-        if alone is not None:
-            options.append([alone])
-        pruned: dict[tuple[int, ...], list[int]] = {}
-        for seed in dict.fromkeys(self._seeds()):
-            core = self._grow([] if seed is None else [seed])
-            for fill in ("single", "ascending"):
-                team = None if core is None else self._fill(core, fill)
-                if team is not None:
-                    key = tuple(sorted(team, key=lambda i: (-self.payload[i], i)))
-                    if key not in pruned:
-                        pruned[key] = self._prune(list(key))
-                    options.append(pruned[key])
-        best = min(dict.fromkeys(tuple(t) for t in options),
-                   key=lambda t: (sum(self.payload[i] for i in t), len(t), sorted(t)))
-        return tuple(sorted(best))
 
 
 def random_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray, need_payload: float,

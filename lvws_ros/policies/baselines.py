@@ -31,7 +31,16 @@ import numpy.typing as npt
 
 from lvws_ros.core.executor import Decision, State, TaskStatus
 from lvws_ros.core.problem import Instance
-from lvws_ros.core.subteams import AmountArray, FloatArray, covered, covers_alone, lightest_cover, random_cover
+from lvws_ros.core.subteams import (
+    AmountArray,
+    CoverPool,
+    FloatArray,
+    covered,
+    covers_alone,
+    lightest_cover,
+    random_cover,
+    whole_numbers,
+)
 from lvws_ros.errors import PolicyError
 
 
@@ -116,6 +125,11 @@ class _SequentialPolicy:
     def decide(self, state: State) -> Decision:
         return self.decide_among(state, state.free_robots(), state.ready_tasks())
 
+    def pool(self, inst: Instance, free: npt.NDArray[np.int64]) -> CoverPool | None:
+        """The free robots as one :class:`CoverPool` for the whole decision, where ``pick``
+        is the lightest cover and the pool gives its answers (None: ``pick`` each time)."""
+        return None
+
     def decide_among(self, state: State, robots: list[int], tasks: list[int]) -> Decision:
         """The decision over some of the free ``robots`` and ready ``tasks`` only (the
         others are left as they are: a plan holds them); ``decide`` takes them all."""
@@ -123,6 +137,9 @@ class _SequentialPolicy:
         self.traits_from = len(inst.capabilities) if inst.traits else None
         free = np.array(robots, dtype=np.int64)
         order = np.array(self.order(inst, tasks), dtype=np.int64)
+        pool = self.pool(inst, free) if inst.travel is None else None
+        if pool is not None:
+            return self._decide_pooled(inst, free, order, pool)
         out = []
         sums = _ReachableSums(state, free, order)
         for k in np.flatnonzero(sums.ok):  # a task the free robots cannot add up to stays so as they leave
@@ -144,6 +161,29 @@ class _SequentialPolicy:
             sums.leave(list(team))
             free = np.delete(free, list(team))
         return Decision(tuple(out), tuple(free.tolist()))
+
+    def _decide_pooled(self, inst: Instance, free: npt.NDArray[np.int64], order: npt.NDArray[np.int64],
+                       pool: CoverPool) -> Decision:
+        """:meth:`decide_among` without travel, the subteams from ``pool`` (a task it does
+        not serve: ``pick`` among the robots left); the same decision."""
+        out = []
+        left = np.ones(len(free), dtype=bool)
+        for task in order.tolist():
+            if not pool.n:
+                break
+            need, payload, roles = inst.task_needs[task], inst.tasks[task].payload, bool(inst.task_roles[task])
+            if not roles and pool.serves(need, payload):
+                team = pool.lightest(need, payload)
+            else:
+                rows = np.flatnonzero(left)
+                picked = self.pick(inst.robot_amounts[free[rows]], inst.robot_payload[free[rows]], need, payload, roles)
+                team = None if picked is None else tuple(int(rows[i]) for i in picked)
+            if team is None:
+                continue
+            out.append((task, tuple(int(free[i]) for i in team)))
+            pool.remove(team)
+            left[list(team)] = False
+        return Decision(tuple(out), tuple(free[left].tolist()))
 
 
 PRIORITIES = ("index", "critical-path")  # the order in which GRP takes the ready tasks
@@ -224,6 +264,12 @@ class GreedyPayloadPolicy(_SequentialPolicy):
     def pick(self, caps: AmountArray, payloads: FloatArray, need_caps: AmountArray,
              need_payload: float, roles: bool = False) -> tuple[int, ...] | None:
         return lightest_cover(caps, payloads, need_caps, need_payload, roles, self.traits_from)
+
+    def pool(self, inst: Instance, free: npt.NDArray[np.int64]) -> CoverPool | None:
+        if self.traits_from is not None or not len(free) \
+                or not whole_numbers(inst.robot_amounts[free], inst.robot_payload[free]):
+            return None
+        return CoverPool(inst.robot_amounts[free], inst.robot_payload[free])
 
 
 class RandomPolicy(_SequentialPolicy):

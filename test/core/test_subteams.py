@@ -222,7 +222,7 @@ def test_with_whole_payloads_the_kinds_give_the_arrays_answer(n, k, kinds, need_
     capabilities, whole payloads) gives the subteam its array version gives, on teams
     with many copies of a kind, robots carrying nothing, up to and beyond
     SEED_EVERY_HOLDER candidates."""
-    from lvws_ros.core.subteams import _array_cover, _WholeCover
+    from lvws_ros.core.subteams import CoverPool, _array_cover
 
     rng = np.random.default_rng(seed)
     kind_caps = rng.random((kinds, k)) < rng.random()
@@ -234,5 +234,5 @@ def test_with_whole_payloads_the_kinds_give_the_arrays_answer(n, k, kinds, need_
         need[0] = 1.0
     if not covers(caps, payloads, need, float(need_payload)):
         return
-    assert _WholeCover(caps, payloads, need, float(need_payload)).lightest() == \
+    assert CoverPool(caps, payloads).lightest(need, float(need_payload)) == \
         _array_cover(caps, payloads, need, float(need_payload), False, None)

@@ -3,15 +3,18 @@ including one robot and one task; bad policies are stopped with a message."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lvws_ros.core.datasets import random_instance
+from lvws_ros.core.datasets import random_instance, subteam_heavy_instance
 from lvws_ros.core.executor import Decision, State, simulate
 from lvws_ros.core.schedule import check_schedule
 from lvws_ros.errors import PolicyError
+from lvws_ros.policies.baselines import PRIORITIES, GreedyPayloadPolicy
 from lvws_ros.registry import POLICY_NAMES, make_policy
 
 BASELINES = ["grp", "rand", "rand_subteam"]
@@ -185,3 +188,30 @@ def test_randomized_grp_is_seeded_and_valid_and_without_noise_is_grp():
     with pytest.raises(PolicyError, match="noise"):
         GreedyPayloadPolicy(noise=-1.0)
 
+
+
+class _GrpPickByPick(GreedyPayloadPolicy):
+    """GRP asking ``lightest_cover`` task by task over arrays (no CoverPool)."""
+
+    def pool(self, inst, free):
+        return None
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 60), m=st.integers(1, 40),
+       family=st.sampled_from(["paper", "subteam-heavy", "fractional"]), priority=st.sampled_from(PRIORITIES))
+def test_grp_from_its_cover_pool_decides_as_grp_pick_by_pick(seed, n, m, family, priority):
+    """GRP's decisions from one CoverPool per decision (robots leaving it as they are
+    given tasks) are those of asking lightest_cover over the robots left each time, step
+    by step through whole schedules (payloads that are not whole take the arrays)."""
+    rng = np.random.default_rng(seed)
+    if family == "subteam-heavy":
+        inst = subteam_heavy_instance(rng, n, m, "s")
+    else:
+        inst = random_instance(rng, n, m, "h")
+        if family == "fractional":
+            inst = dataclasses.replace(inst, robots=tuple(dataclasses.replace(r, payload=r.payload + 0.25)
+                                                          for r in inst.robots))
+    pooled = simulate(inst, GreedyPayloadPolicy(priority=priority))
+    by_pick = simulate(inst, _GrpPickByPick(priority=priority))
+    assert [s.decision.assignments for s in pooled.steps] == [s.decision.assignments for s in by_pick.steps]
