@@ -353,7 +353,7 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
         raise InstanceError(f"TeamState robots ({homes[0]!r}).home: a home needs the TaskGraph's sites")
     return Instance(name, tuple(graph.capability_names), robots, tasks, travel=travel, traits=traits,
                     objective=graph.objective or "makespan", roles=bool(graph.roles),
-                    departure=graph.departure or "together", items_checked=checked)
+                    departure=graph.departure or "together", prechecked=checked)
 
 
 def off_site(robot: RobotInfo) -> str:

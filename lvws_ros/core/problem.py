@@ -75,12 +75,12 @@ class Instance:
     objective: str = "makespan"  # "return": the makespan ends when the last robot is home
     roles: bool = False  # the default of each task's ``roles``
     departure: str = "together"  # DEPARTURES: "each" lets a task be given to busy robots, who set out when free
-    # True: each robot and task was checked already (built from snapshots that passed
-    # online.check_team / check_graph); the whole instance is still checked
-    items_checked: InitVar[bool] = False
+    # True: built from snapshots that passed online.check_team / check_graph, which
+    # checked each robot and task and found no cycle; the rest is still checked
+    prechecked: InitVar[bool] = False
 
-    def __post_init__(self, items_checked: bool) -> None:
-        validate_instance(self, items=not items_checked)
+    def __post_init__(self, prechecked: bool) -> None:
+        validate_instance(self, prechecked=prechecked)
 
     @property
     def num_robots(self) -> int:
@@ -203,7 +203,8 @@ class Instance:
 
     @cached_property
     def topological_order(self) -> tuple[int, ...]:
-        """A topological order of the task indices (set by validation, which computes it anyway)."""
+        """A topological order of the task indices (set by validation, which computes it
+        anyway; for a prechecked instance, computed when first asked)."""
         return _topological_order(self)
 
 
@@ -262,9 +263,10 @@ def _check_vector(vec: Any, k: int, what: str) -> None:
         raise InstanceError(f"{what} must hold only 0 or 1, got {_short(list(vec))}")
 
 
-def validate_instance(inst: Instance, items: bool = True) -> None:
+def validate_instance(inst: Instance, prechecked: bool = False) -> None:
     """Raise InstanceError naming every kind of problem of section 'Problem instance'
-    (``items`` False: each robot and task on its own was checked before; the rest is)."""
+    (``prechecked``: each robot and task on its own, and the absence of cycles, were
+    checked before; the rest is)."""
     k = len(inst.capabilities)
     if not all(isinstance(c, str) and c for c in inst.capabilities):
         raise InstanceError(f"capabilities: names must be non-empty strings, got {_short(list(inst.capabilities))}")
@@ -287,9 +289,9 @@ def validate_instance(inst: Instance, items: bool = True) -> None:
         bad = [inst.robots[r].id for r, v in enumerate(tr.robot_speed) if v != 0 and not 1 / MAX_VALUE <= v <= MAX_VALUE]
         if bad:
             raise InstanceError(f"robot {bad[0]!r} speed: must be between {1 / MAX_VALUE:g} and {MAX_VALUE:g}")
-    if items:
+    if not prechecked:
         _check_items(inst)
-    inst.__dict__["topological_order"] = _topological_order(inst)  # prime the cached_property
+        inst.__dict__["topological_order"] = _topological_order(inst)  # prime the cached_property (cycles found)
     if not isinstance(inst.roles, bool):
         raise InstanceError(f"roles: expected true or false, got {_short(inst.roles)}")
     _check_coverable(inst)

@@ -1,6 +1,6 @@
 """An instance built from snapshots that passed the snapshot checks skips its per-item
-checks (``items_checked``): that is sound only if the snapshot checks refuse everything
-the item checks would. Hostile field values, drawn at random, hold it."""
+checks and its search for cycles (``prechecked``): that is sound only if the snapshot
+checks refuse everything those would. Hostile field values, drawn at random, hold it."""
 
 from __future__ import annotations
 
@@ -29,7 +29,8 @@ def cells(draw: st.DrawFn) -> tuple[TeamSnapshot, GraphSnapshot]:
     n = draw(st.integers(1, 4))
     ids = [f"t{j}" for j in range(n)] + ["ghost"]
     tasks = tuple(TaskInfo(f"t{j}", draw(st.sampled_from([0, 1, 3] * GOOD + [7])), draw(BITS), draw(NUMBERS), draw(NUMBERS),
-                           tuple(draw(st.lists(st.sampled_from(ids[:j] * GOOD + ids[-1:]), max_size=3))),
+                           tuple(draw(st.lists(st.sampled_from(ids * GOOD if draw(st.booleans()) else ids[:j] * GOOD
+                                                               + ids[-1:]), max_size=3))),
                            requires=draw(AMOUNTS) if traits else (), roles=draw(st.sampled_from([0, 1, 2] * GOOD + [5])))
                   for j in range(n))
     return TeamSnapshot(0.0, CAPS, robots, traits), GraphSnapshot(0.0, CAPS, tasks, trait_names=traits)
@@ -49,7 +50,9 @@ def test_what_passes_the_snapshot_checks_passes_the_item_checks(cell: tuple[Team
     except InstanceError:
         return  # refused as a whole instance (coverage, ...): never built unchecked
     _check_items(inst)  # would raise InstanceError if a robot or task were bad
-    assert build_instance(team, graph) == inst  # the same as built with every check
+    full = build_instance(team, graph)  # the same as built with every check
+    assert full == inst
+    assert full.topological_order == inst.topological_order
 
 
 def test_a_prerequisite_given_twice_is_refused_naming_the_field() -> None:
