@@ -125,10 +125,11 @@ class PlannedAutoPolicy:
             self._cell = None  # the new process gets the cell; the plan followed so far stays until it sends one
         self._take(self.process.latest())
         new_cell = self._cell is not state.instance
-        self._cell = state.instance
-        if self.follower is None and new_cell and self.first_wait > 0:  # the cell's first plan: the best within
-            self.process.send(state)  # first_wait (else the cell goes with the state after the decision: its
-            self.process.wait_ready(READY_WAIT)  # pickling, in the sender thread, would hold the GIL meanwhile)
+        if new_cell:
+            self._cell = state.instance
+            self.process.send(state)
+        if self.follower is None and new_cell:  # the cell's first plan: the best within first_wait
+            self.process.wait_ready(READY_WAIT)  # started with the policy: normally long ready by now
             end = time.perf_counter() + self.first_wait
             while (left := end - time.perf_counter()) > 0 and (update := self.process.latest(left)) is not None:
                 self._take(update)
