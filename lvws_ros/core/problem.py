@@ -185,17 +185,24 @@ class Instance:
                 tail[j] += max(tail[s] for s in self.successors[j])
         return tail
 
-    @cached_property
-    def descendant_count(self) -> npt.NDArray[np.int64]:
-        """How many tasks depend on each task, directly or not: reachability as bit
-        sets (M^2 / 8 bytes, 3 MB at 5,000 tasks), O(M E / 8) time."""
+    def reachability(self) -> npt.NDArray[np.uint8]:
+        """(M, ceil(M / 8)) bit sets in np.packbits order: bit k of row j is set where task k
+        depends on task j, directly or not (M^2 / 8 bytes, 3 MB at 5,000 tasks; built
+        anew each call, O(M E / 8) time)."""
         m = self.num_tasks
         reach = np.zeros((m, (m + 7) // 8), dtype=np.uint8)
-        bit = np.uint8(1) << (7 - np.arange(m) % 8).astype(np.uint8)  # np.packbits order
+        bit = np.uint8(1) << (7 - np.arange(m) % 8).astype(np.uint8)
         for j in reversed(self.topological_order):
             for s in self.successors[j]:
                 reach[j] |= reach[s]
                 reach[j, s // 8] |= bit[s]
+        return reach
+
+    @cached_property
+    def descendant_count(self) -> npt.NDArray[np.int64]:
+        """How many tasks depend on each task, directly or not (:meth:`reachability`)."""
+        m = self.num_tasks
+        reach = self.reachability()
         count = np.zeros(m, dtype=np.int64)
         for a in range(0, m, 1024):  # popcount in row blocks: bounded memory
             count[a:a + 1024] = np.unpackbits(reach[a:a + 1024], axis=1).sum(axis=1)

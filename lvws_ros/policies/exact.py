@@ -972,17 +972,13 @@ def _unordered_pairs(inst: Instance, h: _Horizon) -> list[tuple[int, int]]:
     """Pairs of tasks left that may run at the same time: neither precedes the other
     (directly or not) and their start windows let them overlap."""
     todo = h.todo
-    where = {j: k for k, j in enumerate(todo)}
-    before = {j: 0 for j in todo}  # a bit per task left that must end before j starts
-    for j in inst.topological_order:
-        if j in where:
-            for p in inst.prerequisites[j]:
-                if p in where:
-                    before[j] |= before[p] | (1 << where[p])
+    reach = inst.reachability()
+    top = 8 * reach.shape[1] - 1  # task k is bit top - k of a row read as one big-endian number
+    later = [int.from_bytes(row.tobytes(), "big") for row in reach]
     out = []
     for a, i in enumerate(todo):
         for j in todo[a + 1:]:
-            if before[j] >> a & 1 or before[i] >> where[j] & 1:
+            if later[i] >> (top - j) & 1 or later[j] >> (top - i) & 1:
                 continue
             if h.upper - h.tail[i] + h.dur[i] <= h.head[j] or h.upper - h.tail[j] + h.dur[j] <= h.head[i]:
                 continue

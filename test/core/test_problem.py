@@ -89,3 +89,24 @@ def test_malformed_and_missing_files(tmp_path):
 def test_shipped_example_loads():
     inst = load_instance(REPO / "config" / "example_instance.json")
     assert inst.num_robots == 6 and inst.num_tasks == 18
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_reachability_is_the_transitive_closure_of_the_prerequisites(seed: int) -> None:
+    """Bit k of row j set exactly where task k depends on task j, directly or not (a walk
+    over the successors); the descendant counts are its rows' sums."""
+    import numpy as np
+
+    from lvws_ros.core.datasets import random_instance
+
+    inst = random_instance(np.random.default_rng(seed), 4, 9 + 11 * seed, "h")
+    bits = np.unpackbits(inst.reachability(), axis=1)[:, :inst.num_tasks].astype(bool)
+    for j in range(inst.num_tasks):
+        seen, stack = set(), list(inst.successors[j])
+        while stack:
+            k = stack.pop()
+            if k not in seen:
+                seen.add(k)
+                stack.extend(inst.successors[k])
+        assert set(np.flatnonzero(bits[j]).tolist()) == seen
+    assert inst.descendant_count.tolist() == bits.sum(axis=1).tolist()
