@@ -22,7 +22,6 @@ instance validation, the network's pair features) asks :func:`shortfall`,
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -485,26 +484,32 @@ def _array_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray
     return tuple(sorted(best))
 
 
+def _whole(values: npt.ArrayLike) -> bool:
+    """Whole numbers >= 0 whose sum stays below 2^52: every sum of some of them is exact
+    in floating point, in any order."""
+    v = np.asarray(values, dtype=np.float64)
+    return bool(np.isfinite(v).all() and (v >= 0).all() and (v == np.round(v)).all() and v.sum() < 2.0 ** 52)
+
+
 def whole_numbers(caps: AmountArray, payloads: FloatArray) -> bool:
-    """0/1 capabilities (at most MASK_BITS) and whole payloads (below 2^52): every sum
+    """0/1 capabilities (at most MASK_BITS) and whole payloads (:func:`_whole`): every sum
     :func:`lightest_cover` forms is exact in any order, so :class:`CoverPool` gives its
     very answer (for tasks whose needs are whole too: :meth:`CoverPool.serves`)."""
     caps = np.asarray(caps)
     if caps.ndim != 2 or caps.shape[1] > MASK_BITS or not ((caps == 0) | (caps == 1)).all():
         return False
-    values = np.asarray(payloads, dtype=np.float64)
-    return bool(np.isfinite(values).all() and (np.abs(values) < 2.0 ** 52).all() and (values == np.round(values)).all())
+    return _whole(payloads)
 
 
 def _parts(items: IntArray, starts: IntArray) -> list[list[int]]:
     """``items`` cut before each of the places ``starts`` (the first is 0), as lists."""
-    flat, ends = items.tolist(), [*starts.tolist()[1:], len(items)]
-    return [flat[a:b] for a, b in zip(starts.tolist(), ends, strict=True)]
+    flat, cuts = items.tolist(), starts.tolist()
+    return [flat[a:b] for a, b in zip(cuts, [*cuts[1:], len(flat)][:len(cuts)], strict=True)]
 
 
 class CoverPool:
     """Candidates as kinds of robot (the same capabilities and payload), for 0/1
-    capabilities and whole payloads (:func:`_whole_numbers`): :meth:`lightest` gives
+    capabilities and whole payloads (:func:`whole_numbers`): :meth:`lightest` gives
     :func:`lightest_cover`'s answer built step by step in plain Python, and robots that
     are given a task :meth:`remove`, so GRP asks task after task without building it
     again. Each step of the construction takes the first robot of an order where a kind's
@@ -518,12 +523,12 @@ class CoverPool:
         bits = (caps > 0).astype(np.int64) @ self.weights
         self.mask, self.payload = bits.tolist(), payloads.tolist()
         light = np.argsort(payloads, kind="stable")  # the lightest first, lower index on ties
-        values, of_value = np.unique(payloads[light], return_index=True)
+        _, of_value = np.unique(payloads[light], return_index=True)
         self.lightest_first = _parts(light, of_value)  # per payload, by index
-        kind = bits[light] * len(values) + np.searchsorted(values, payloads[light])
-        by_kind = np.argsort(kind, kind="stable")
-        _, first = np.unique(kind[by_kind], return_index=True)
-        copies = _parts(light[by_kind], first)  # each kind's copies by index
+        by_kind = np.lexsort((np.arange(len(bits)), payloads, bits))  # each kind's copies by index
+        b, p = bits[by_kind], payloads[by_kind]
+        starts = np.flatnonzero(np.r_[True, (b[1:] != b[:-1]) | (p[1:] != p[:-1])]) if len(b) else by_kind
+        copies = _parts(by_kind, starts)
         # the kinds, the lightest first (then by their first copy): (payload, bits, copies)
         self.kinds = sorted(((self.payload[c[0]], self.mask[c[0]], c) for c in copies), key=lambda x: (x[0], x[2][0]))
         of_payload = {self.payload[g[0]]: g for g in self.lightest_first}
@@ -532,11 +537,11 @@ class CoverPool:
         self.total = float(sum(self.payload))
         self.need, self.need_payload = 0, 0.0
 
-    def serves(self, need_caps: AmountArray, need_payload: float) -> bool:
+    @staticmethod
+    def serves(need_caps: AmountArray, need_payload: float) -> bool:
         """Whether the task's needs are 0/1 capabilities and a whole payload."""
         need = np.asarray(need_caps)
-        return bool(((need == 0) | (need == 1)).all() and math.isfinite(need_payload)
-                    and float(need_payload).is_integer() and abs(need_payload) < 2.0 ** 52)
+        return bool(((need == 0) | (need == 1)).all()) and _whole([need_payload])
 
     def remove(self, team: Sequence[int]) -> None:
         """The robots ``team`` leave the candidates."""

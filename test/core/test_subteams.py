@@ -215,13 +215,14 @@ def test_the_ascending_payload_fill_adds_the_lightest_robots_one_by_one(payloads
 
 
 @settings(max_examples=500, deadline=None, derandomize=True)
-@given(n=st.integers(1, 60), k=st.integers(1, 4), kinds=st.integers(1, 12), need_payload=st.integers(0, 40),
-       zero=st.booleans(), seed=st.integers(0, 10_000))
-def test_with_whole_payloads_the_kinds_give_the_arrays_answer(n, k, kinds, need_payload, zero, seed):
+@given(n=st.integers(1, 60), k=st.sampled_from([1, 2, 3, 4, 61, 62]), kinds=st.integers(1, 12),
+       need_payload=st.integers(0, 40), zero=st.booleans(), spread=st.booleans(), seed=st.integers(0, 10_000))
+def test_with_whole_payloads_the_kinds_give_the_arrays_answer(n, k, kinds, need_payload, zero, spread, seed):
     """lightest_cover's construction in plain Python over the kinds of robot (0/1
-    capabilities, whole payloads) gives the subteam its array version gives, on teams
-    with many copies of a kind, robots carrying nothing, up to and beyond
-    SEED_EVERY_HOLDER candidates."""
+    capabilities, whole payloads; a CoverPool) gives the subteam its array version gives,
+    on teams with many copies of a kind, robots carrying nothing, up to and beyond
+    SEED_EVERY_HOLDER candidates, up to MASK_BITS capabilities, and after robots left the
+    pool (against the arrays of the robots left)."""
     from lvws_ros.core.subteams import CoverPool, _array_cover
 
     rng = np.random.default_rng(seed)
@@ -229,10 +230,34 @@ def test_with_whole_payloads_the_kinds_give_the_arrays_answer(n, k, kinds, need_
     kind_payload = rng.integers(0 if zero else 1, 9, kinds).astype(float)
     pick = rng.integers(0, kinds, n)
     caps, payloads = kind_caps[pick].astype(float), kind_payload[pick]
-    need = (rng.random(k) < 0.5).astype(float)
-    if not need.any() and need_payload == 0:
-        need[0] = 1.0
-    if not covers(caps, payloads, need, float(need_payload)):
-        return
-    assert CoverPool(caps, payloads).lightest(need, float(need_payload)) == \
-        _array_cover(caps, payloads, need, float(need_payload), False, None)
+    if spread:  # every robot a payload of its own: many kinds
+        payloads = payloads + 16 * np.arange(n)
+    pool, left = CoverPool(caps, payloads), np.arange(n)
+    for _ in range(3):
+        need = (rng.random(k) < 0.5).astype(float)
+        if not need.any() and need_payload == 0:
+            need[0] = 1.0
+        want = None
+        if covers(caps[left], payloads[left], need, float(need_payload)):
+            found = _array_cover(caps[left], payloads[left], need, float(need_payload), False, None)
+            want = tuple(int(left[i]) for i in found)
+        assert pool.lightest(need, float(need_payload)) == want
+        gone = rng.choice(left, size=min(len(left), int(rng.integers(1, 4))), replace=False)
+        pool.remove(gone.tolist())
+        left = np.setdiff1d(left, gone)
+        if not len(left):
+            break
+
+
+def test_a_pool_keeps_the_last_capability_of_mask_bits_apart_whatever_the_payloads():
+    """Robots that differ only in capability MASK_BITS - 1 stay different kinds with 8
+    payloads about (a kind key of bits times payloads once wrapped around 2^64 there)."""
+    from lvws_ros.core.subteams import MASK_BITS, CoverPool, _array_cover
+
+    caps = np.zeros((9, MASK_BITS))
+    caps[1, MASK_BITS - 1] = 1
+    payloads = np.array([1.0, 1, 2, 3, 4, 5, 6, 7, 8])
+    need = np.zeros(MASK_BITS)
+    need[MASK_BITS - 1] = 1
+    assert _array_cover(caps, payloads, need, 1.0, False, None) == (1,)
+    assert CoverPool(caps, payloads).lightest(need, 1.0) == (1,) == lightest_cover(caps, payloads, need, 1.0)

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from lvws_ros.core.datasets import random_instance, subteam_heavy_instance
 from lvws_ros.core.executor import Decision, State, simulate
 from lvws_ros.core.schedule import check_schedule
+from lvws_ros.core.subteams import _array_cover, covers
 from lvws_ros.errors import PolicyError
 from lvws_ros.policies.baselines import PRIORITIES, GreedyPayloadPolicy
 from lvws_ros.registry import POLICY_NAMES, make_policy
@@ -189,12 +190,16 @@ def test_randomized_grp_is_seeded_and_valid_and_without_noise_is_grp():
         GreedyPayloadPolicy(noise=-1.0)
 
 
-
 class _GrpPickByPick(GreedyPayloadPolicy):
-    """GRP asking ``lightest_cover`` task by task over arrays (no CoverPool)."""
+    """GRP asking for the lightest cover task by task, always in arrays (no CoverPool)."""
 
     def pool(self, inst, free):
         return None
+
+    def pick(self, caps, payloads, need_caps, need_payload, roles=False):
+        if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload, roles):
+            return None
+        return _array_cover(caps, payloads, need_caps, need_payload, roles, self.traits_from)
 
 
 @settings(max_examples=40, deadline=None)
@@ -202,8 +207,9 @@ class _GrpPickByPick(GreedyPayloadPolicy):
        family=st.sampled_from(["paper", "subteam-heavy", "fractional"]), priority=st.sampled_from(PRIORITIES))
 def test_grp_from_its_cover_pool_decides_as_grp_pick_by_pick(seed, n, m, family, priority):
     """GRP's decisions from one CoverPool per decision (robots leaving it as they are
-    given tasks) are those of asking lightest_cover over the robots left each time, step
-    by step through whole schedules (payloads that are not whole take the arrays)."""
+    given tasks) are those of asking for the lightest cover in arrays over the robots
+    left each time, step by step through whole schedules (payloads that are not whole
+    take the arrays in both)."""
     rng = np.random.default_rng(seed)
     if family == "subteam-heavy":
         inst = subteam_heavy_instance(rng, n, m, "s")
