@@ -431,10 +431,9 @@ def lightest_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArr
     otherwise in arrays."""
     if len(caps) == 0 or not covers(caps, payloads, need_caps, need_payload, roles):
         return None
-    if not roles and traits_from is None and whole_numbers(caps, payloads):
-        pool = CoverPool(caps, payloads)
-        if pool.serves(need_caps, need_payload):
-            return pool.lightest(need_caps, need_payload)
+    if not roles and traits_from is None and CoverPool.serves(need_caps, need_payload) \
+            and whole_numbers(caps, payloads):
+        return CoverPool(caps, payloads).lightest(need_caps, need_payload)
     return _array_cover(caps, payloads, need_caps, need_payload, roles, traits_from)
 
 
@@ -484,6 +483,12 @@ def _array_cover(caps: AmountArray, payloads: FloatArray, need_caps: AmountArray
     return tuple(sorted(best))
 
 
+def _zero_one(values: npt.ArrayLike) -> bool:
+    """Every value 0 or 1 (capabilities as amounts)."""
+    v = np.asarray(values)
+    return bool(((v == 0) | (v == 1)).all())
+
+
 def _whole(values: npt.ArrayLike) -> bool:
     """Whole numbers >= 0 whose sum stays below 2^52: every sum of some of them is exact
     in floating point, in any order."""
@@ -496,15 +501,15 @@ def whole_numbers(caps: AmountArray, payloads: FloatArray) -> bool:
     :func:`lightest_cover` forms is exact in any order, so :class:`CoverPool` gives its
     very answer (for tasks whose needs are whole too: :meth:`CoverPool.serves`)."""
     caps = np.asarray(caps)
-    if caps.ndim != 2 or caps.shape[1] > MASK_BITS or not ((caps == 0) | (caps == 1)).all():
-        return False
-    return _whole(payloads)
+    return caps.ndim == 2 and caps.shape[1] <= MASK_BITS and _zero_one(caps) and _whole(payloads)
 
 
 def _parts(items: IntArray, starts: IntArray) -> list[list[int]]:
-    """``items`` cut before each of the places ``starts`` (the first is 0), as lists."""
+    """``items`` cut before each of the places ``starts`` (the first is 0; none: no part),
+    as lists."""
     flat, cuts = items.tolist(), starts.tolist()
-    return [flat[a:b] for a, b in zip(cuts, [*cuts[1:], len(flat)][:len(cuts)], strict=True)]
+    ends = [*cuts[1:], len(flat)] if cuts else []
+    return [flat[a:b] for a, b in zip(cuts, ends, strict=True)]
 
 
 class CoverPool:
@@ -527,8 +532,8 @@ class CoverPool:
         self.lightest_first = _parts(light, of_value)  # per payload, by index
         by_kind = np.lexsort((np.arange(len(bits)), payloads, bits))  # each kind's copies by index
         b, p = bits[by_kind], payloads[by_kind]
-        starts = np.flatnonzero(np.r_[True, (b[1:] != b[:-1]) | (p[1:] != p[:-1])]) if len(b) else by_kind
-        copies = _parts(by_kind, starts)
+        starts = np.flatnonzero(np.r_[True, (b[1:] != b[:-1]) | (p[1:] != p[:-1])])  # where a kind begins
+        copies = _parts(by_kind, starts[:len(b)])  # no robot: no kind
         # the kinds, the lightest first (then by their first copy): (payload, bits, copies)
         self.kinds = sorted(((self.payload[c[0]], self.mask[c[0]], c) for c in copies), key=lambda x: (x[0], x[2][0]))
         of_payload = {self.payload[g[0]]: g for g in self.lightest_first}
@@ -540,8 +545,7 @@ class CoverPool:
     @staticmethod
     def serves(need_caps: AmountArray, need_payload: float) -> bool:
         """Whether the task's needs are 0/1 capabilities and a whole payload."""
-        need = np.asarray(need_caps)
-        return bool(((need == 0) | (need == 1)).all()) and _whole([need_payload])
+        return _zero_one(need_caps) and _whole([need_payload])
 
     def remove(self, team: Sequence[int]) -> None:
         """The robots ``team`` leave the candidates."""
@@ -610,7 +614,8 @@ class CoverPool:
         missing = self.need & ~got
         while missing:
             top = max((bin(bits & missing).count("1") for _, bits, copies in self.kinds
-                       if bits & missing and copies and (copies[0] not in used or any(c not in used for c in copies))),
+                       if bits & missing and copies and (copies[0] not in used  # the usual case, at once
+                                                          or any(c not in used for c in copies))),
                       default=0)
             if top <= 0:
                 return None
