@@ -136,8 +136,8 @@ def cell_snapshots(state: Any) -> tuple[Any, Any]:
 
 
 class _SnapshotWire:
-    """The world's state as a node gets it from a world of snapshots: both messages, read as
-    the scheduler node reads them."""
+    """The world's state as a node gets it from a world of snapshots: both messages'
+    serialized bytes, read as the scheduler node reads them."""
 
     def __init__(self) -> None:
         from lvws_ros.ros import convert
@@ -146,10 +146,20 @@ class _SnapshotWire:
         self.team_reader, self.graph_reader = convert.TeamReader(), convert.GraphReader()
         self.checked: Any = None  # a graph that passed the checks before the node's core saw one
 
-    def send(self, team: Any, graph: Any) -> Any:
-        """The messages of this state (the world's work), and the node's reading of them."""
-        team_msg, graph_msg = self.convert.team_to_msg(team), self.convert.graph_to_msg(graph)
-        return lambda: (self.team_reader.read(team_msg), self.graph_reader.read(graph_msg))
+    def send(self, team: Any, graph: Any, raw: bool = True) -> Any:
+        """The messages of this state serialized (the world's work), and the node's reading
+        of them: of their bytes (``raw``, as it reads the snapshot topics), or of rclpy's
+        messages (as it reads a resync answer)."""
+        from lvws_msgs.msg import TaskGraph, TeamState
+        from rclpy.serialization import deserialize_message, serialize_message
+
+        team_bytes = serialize_message(self.convert.team_to_msg(team))
+        graph_bytes = serialize_message(self.convert.graph_to_msg(graph))
+        if raw:
+            return lambda: (self.team_reader.read_serialized(team_bytes),
+                            self.graph_reader.read_serialized(graph_bytes))
+        return lambda: (self.team_reader.read(deserialize_message(team_bytes, TeamState)),
+                        self.graph_reader.read(deserialize_message(graph_bytes, TaskGraph)))
 
 
 class _ChangeWire(_SnapshotWire):
@@ -164,12 +174,12 @@ class _ChangeWire(_SnapshotWire):
         self.sent: tuple[Any, Any] | None = None
         self.seq = 0
 
-    def send(self, team: Any, graph: Any) -> Any:
+    def send(self, team: Any, graph: Any, raw: bool = True) -> Any:
         from lvws_ros.core.changes import changes_between
 
         follower = self.follower
         if self.sent is None:
-            first = super().send(team, graph)
+            first = super().send(team, graph, raw=False)  # the resync service's answer
 
             def read() -> Any:
                 first_team, first_graph = first()

@@ -26,12 +26,14 @@ from lvws_msgs.msg import (
     TaskGraph,
     TeamState,
 )
+from rclpy.serialization import deserialize_message
 
 from lvws_ros.core.changes import CellChanges as Changes
 from lvws_ros.core.dispatch import GoalNews, Moved
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import GraphSnapshot, OnlineDecision, RobotInfo, TaskInfo, TeamSnapshot
-from lvws_ros.errors import ConfigError
+from lvws_ros.errors import ConfigError, InstanceError
+from lvws_ros.ros.serialized import Unreadable, layout_of
 from lvws_ros.sim.config import PART_PAYLOAD
 
 __all__ = [
@@ -212,13 +214,13 @@ class _Reader:
         self.forget()
         return False
 
-    def _items(self, items: Any, fields: Any, convert: Any, copy: Any) -> tuple[Any, ...]:
+    def _items(self, items: Any, key_of: Any, fields: Any, convert: Any, copy: Any) -> tuple[Any, ...]:
         raw_of, info_of = self._raw, self._info
         raw: dict[str, tuple[Any, ...]] = {}
         info: dict[str, Any] = {}
         out = []
         for item in items:
-            key = item.id
+            key = key_of(item)
             now = fields(item)
             old = raw_of.get(key)
             if old is not None and old == now:
@@ -286,18 +288,74 @@ def _robot_of_fields(key: str, f: tuple[Any, ...]) -> RobotInfo:
                      str(f[12]))
 
 
+_item_id = operator.attrgetter("id")
+
+
+class _Serialized:
+    """How a snapshot message's serialized bytes read (:mod:`~lvws_ros.ros.serialized`):
+    its flat fields by name, and the getter of each item's fields in the order the
+    conversions take them (``None`` where the message class has fields that reader does not
+    take, or lacks one of these)."""
+
+    def __init__(self, cls: Any, item_cls: Any, fields: tuple[str, ...]) -> None:
+        self.cls = cls
+        self.read: Any = None
+        try:
+            layout, item_names = layout_of(cls), layout_of(item_cls).names
+            positions = [item_names.index(name) for name in ("id", *fields)]
+        except (Unreadable, ValueError):
+            return
+        self.read, self.names = layout.read, layout.names
+        self.key, self.fields = operator.itemgetter(positions[0]), operator.itemgetter(*positions[1:])
+
+    def values(self, data: bytes) -> dict[str, Any] | None:
+        """The message's flat fields by name, ``None`` where rclpy must read it;
+        InstanceError for bytes neither reads."""
+        if self.read is None:
+            return None
+        try:
+            flat = self.read(data)
+        except ValueError as exc:
+            try:
+                deserialize_message(data, self.cls)
+            except Exception:
+                raise InstanceError(f"a {self.cls.__name__} whose bytes do not read: {exc}") from None
+            return None  # rclpy reads it: let it
+        return None if flat is None else dict(zip(self.names, flat, strict=True))
+
+
+_GRAPH_BYTES = _Serialized(TaskGraph, Task, _TASK_FIELDS)
+_TEAM_BYTES = _Serialized(TeamState, RobotState, _ROBOT_FIELDS)
+
+
+def _same(fields: tuple[Any, ...]) -> tuple[Any, ...]:  # tuples read from bytes are not reused
+    return fields
+
+
 class GraphReader(_Reader):
     """:func:`graph_from_msg` for the messages of one stream (the scheduler node's): equal
     snapshots, the work of a message in proportion to the tasks that changed since the
     previous one (plus a pass reading the fields). Messages without the travel and trait
-    fields, or whose sequences are not plain (a bag reader's), are converted whole."""
+    fields, or whose sequences are not plain (a bag reader's), are converted whole.
+    :meth:`read_serialized` takes the message's serialized bytes instead."""
 
     def read(self, msg: Any) -> GraphSnapshot:
         tasks = msg.tasks
         if not self._plain(tasks, "requires", ("capabilities", "requires")):
             return graph_from_msg(msg)
         fields = _fields_of(tasks[0], _task_fields, _task_slots)
-        return _graph(msg, self._items(tasks, fields, _task_of_fields, _task_copy))
+        return _graph(msg, self._items(tasks, _item_id, fields, _task_of_fields, _task_copy))
+
+    def read_serialized(self, data: bytes) -> GraphSnapshot:
+        """:meth:`read` of a TaskGraph's serialized bytes (a raw subscription's), without a
+        message object per task."""
+        v = _GRAPH_BYTES.values(data)
+        if v is None:
+            return self.read(deserialize_message(data, TaskGraph))
+        tasks = self._items(v["tasks"], _GRAPH_BYTES.key, _GRAPH_BYTES.fields, _task_of_fields, _same)
+        return GraphSnapshot(_seconds(v["header.stamp.sec"], v["header.stamp.nanosec"]), v["capability_names"],
+                             tasks, tuple(v["sites"]), v["site_distances"], v["trait_names"], v["roles"],
+                             v["objective"], v["departure"])
 
 
 class TeamReader(_Reader):
@@ -309,7 +367,17 @@ class TeamReader(_Reader):
             return team_from_msg(msg)
         fields = _fields_of(robots[0], _robot_fields, _robot_slots)
         return TeamSnapshot(from_time(msg.header.stamp), tuple(msg.capability_names),
-                            self._items(robots, fields, _robot_of_fields, _robot_copy), tuple(msg.trait_names))
+                            self._items(robots, _item_id, fields, _robot_of_fields, _robot_copy),
+                            tuple(msg.trait_names))
+
+    def read_serialized(self, data: bytes) -> TeamSnapshot:
+        """:meth:`read` of a TeamState's serialized bytes, as :meth:`GraphReader.read_serialized`."""
+        v = _TEAM_BYTES.values(data)
+        if v is None:
+            return self.read(deserialize_message(data, TeamState))
+        robots = self._items(v["robots"], _TEAM_BYTES.key, _TEAM_BYTES.fields, _robot_of_fields, _same)
+        return TeamSnapshot(_seconds(v["header.stamp.sec"], v["header.stamp.nanosec"]), v["capability_names"],
+                            robots, v["trait_names"])
 
 
 def decision_to_msg(d: OnlineDecision, stamp: Time) -> AssignmentArray:

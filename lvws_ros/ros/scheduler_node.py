@@ -265,8 +265,9 @@ class SchedulerNode(LifecycleNode):
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.pub = self.create_publisher(AssignmentArray, topics.ASSIGNMENTS_TOPIC, topics.ASSIGNMENTS_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS_TOPIC, topics.DIAGNOSTICS_QOS)
-        self.create_subscription(TeamState, topics.TEAM_TOPIC, self.on_team, topics.TEAM_QOS)
-        self.create_subscription(TaskGraph, topics.GRAPH_TOPIC, self.on_graph, topics.GRAPH_QOS)
+        # the snapshots come as their serialized bytes: read without a message object per task
+        self.create_subscription(TeamState, topics.TEAM_TOPIC, self.on_team, topics.TEAM_QOS, raw=True)
+        self.create_subscription(TaskGraph, topics.GRAPH_TOPIC, self.on_graph, topics.GRAPH_QOS, raw=True)
         self.create_subscription(CellChanges, topics.CHANGES_TOPIC, self.on_changes, topics.CHANGES_QOS)
         self.follower = ChangeFollower(float(values["retire_after"]))  # the world's changes, once it sends some
         self.feed = ChangeFeed(self, self.follower, lambda res: self.guarded(lambda: self.resynced(res)),
@@ -384,21 +385,21 @@ class SchedulerNode(LifecycleNode):
             self.when_idle(lambda: setattr(self.core, "ack_timeout", timeout) if self.core is not None else None)
         return SetParametersResult(successful=True)
 
-    def on_team(self, msg: TeamState) -> None:
+    def on_team(self, data: bytes) -> None:
         self.received += 1
         if self.follower.cell is not None:  # a world that speaks changes: its resync answers are the snapshots
             self.snapshots_ignored += 1
             return
         self.arrived = time.perf_counter()
-        self.take("TeamState", lambda core: core.offer_team(self.team_reader.read(msg)))
+        self.take("TeamState", lambda core: core.offer_team(self.team_reader.read_serialized(data)))
 
-    def on_graph(self, msg: TaskGraph) -> None:
+    def on_graph(self, data: bytes) -> None:
         self.received += 1
         if self.follower.cell is not None:
             self.snapshots_ignored += 1
             return
         self.arrived = time.perf_counter()
-        self.take("TaskGraph", lambda core: core.offer_graph(self.graph_reader.read(msg)))
+        self.take("TaskGraph", lambda core: core.offer_graph(self.graph_reader.read_serialized(data)))
 
     def on_changes(self, msg: CellChanges) -> None:
         """A batch of the world's changes: taken in order (a gap or a batch that cannot

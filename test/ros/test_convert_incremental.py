@@ -1,5 +1,6 @@
 """The incremental message readers (GraphReader, TeamReader) and the incremental checks:
-after any change a message can carry, the reader's snapshot equals the whole conversion's,
+after any change a message can carry, the reader's snapshot (of the message, or of its
+serialized bytes) equals the whole conversion's,
 tasks and robots that did not change keep their objects, and a snapshot checked against the
 one before is refused exactly when a whole check refuses it."""
 
@@ -11,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lvws_msgs.msg import TaskGraph, TeamState
+from rclpy.serialization import serialize_message
 
 from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot, check_graph, check_team
 from lvws_ros.errors import InstanceError
@@ -72,31 +74,37 @@ TEAM_CHANGES = {
 }
 
 
-def _read_through(reader, snapshot, to_msg, from_msg, items, changes, steps):
+def _read_through(reader, snapshot, to_msg, from_msg, items, changes, steps, serialized):
     """Feed ``reader`` the messages of ``snapshot`` after each of ``steps`` (names of
-    ``changes``): each snapshot read equals the whole conversion's, and an unchanged item
-    (``items`` of a snapshot) is the very object of the message before."""
-    before = reader.read(to_msg(snapshot))
+    ``changes``; ``serialized``: their bytes): each snapshot read equals the whole
+    conversion's, and an unchanged item (``items`` of a snapshot) is the very object of the
+    message before."""
+    read = (lambda msg: reader.read_serialized(serialize_message(msg))) if serialized else reader.read
+    before = read(to_msg(snapshot))
     for n, change in enumerate(steps):
         snapshot = dataclasses.replace(changes[change](snapshot), stamp=float(n + 1))
         msg = to_msg(snapshot)
-        got = reader.read(msg)
+        got = read(msg)
         assert got == from_msg(msg)
         old = {x.id: x for x in items(before)}
         assert all(x is old[x.id] for x in items(got) if x.id in old and x == old[x.id])
         before = got
 
 
+@pytest.mark.parametrize("serialized", [False, True], ids=["messages", "bytes"])
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.sampled_from(sorted(GRAPH_CHANGES)), min_size=1, max_size=6))
-def test_the_graph_reader_equals_the_whole_conversion_after_any_changes(changes: list[str]) -> None:
-    _read_through(GraphReader(), graph(), graph_to_msg, graph_from_msg, lambda g: g.tasks, GRAPH_CHANGES, changes)
+def test_the_graph_reader_equals_the_whole_conversion_after_any_changes(serialized: bool, changes: list[str]) -> None:
+    _read_through(GraphReader(), graph(), graph_to_msg, graph_from_msg, lambda g: g.tasks, GRAPH_CHANGES, changes,
+                  serialized)
 
 
+@pytest.mark.parametrize("serialized", [False, True], ids=["messages", "bytes"])
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.sampled_from(sorted(TEAM_CHANGES)), min_size=1, max_size=5))
-def test_the_team_reader_equals_the_whole_conversion_after_any_changes(changes: list[str]) -> None:
-    _read_through(TeamReader(), team(), team_to_msg, team_from_msg, lambda t: t.robots, TEAM_CHANGES, changes)
+def test_the_team_reader_equals_the_whole_conversion_after_any_changes(serialized: bool, changes: list[str]) -> None:
+    _read_through(TeamReader(), team(), team_to_msg, team_from_msg, lambda t: t.robots, TEAM_CHANGES, changes,
+                  serialized)
 
 
 def test_a_reused_message_changed_in_place_is_read_again() -> None:
