@@ -293,35 +293,36 @@ _item_id = operator.attrgetter("id")
 
 class _Serialized:
     """How a snapshot message's serialized bytes read (:mod:`~lvws_ros.ros.serialized`):
-    its flat fields by name, and the getter of each item's fields in the order the
-    conversions take them (``None`` where the message class has fields that reader does not
-    take, or lacks one of these)."""
+    its flat fields by name (:attr:`names`), and the getters of an item's id (:attr:`key`)
+    and of its other fields in the order the conversions take them (:attr:`fields`). Where
+    the message class has fields that reader does not take, or its items lack one of these,
+    every message is left to rclpy (:attr:`layout` None)."""
 
     def __init__(self, cls: Any, item_cls: Any, fields: tuple[str, ...]) -> None:
         self.cls = cls
-        self.read: Any = None
+        self.layout: Any = None
         try:
             layout, item_names = layout_of(cls), layout_of(item_cls).names
             positions = [item_names.index(name) for name in ("id", *fields)]
         except (Unreadable, ValueError):
             return
-        self.read, self.names = layout.read, layout.names
+        self.layout = layout
         self.key, self.fields = operator.itemgetter(positions[0]), operator.itemgetter(*positions[1:])
 
-    def values(self, data: bytes) -> dict[str, Any] | None:
-        """The message's flat fields by name, ``None`` where rclpy must read it;
-        InstanceError for bytes neither reads."""
-        if self.read is None:
-            return None
-        try:
-            flat = self.read(data)
-        except ValueError as exc:
+    def values(self, data: bytes) -> dict[str, Any] | Any:
+        """The message's flat fields by name, or where they do not read here, the message
+        as rclpy reads it; InstanceError for bytes neither reads."""
+        if self.layout is not None:
             try:
-                deserialize_message(data, self.cls)
-            except Exception:
-                raise InstanceError(f"a {self.cls.__name__} whose bytes do not read: {exc}") from None
-            return None  # rclpy reads it: let it
-        return None if flat is None else dict(zip(self.names, flat, strict=True))
+                flat = self.layout.read(data)
+            except ValueError:
+                flat = None  # rclpy decides (bytes it refuses too are refused below)
+            if flat is not None:
+                return dict(zip(self.layout.names, flat, strict=True))
+        try:
+            return deserialize_message(data, self.cls)
+        except Exception as exc:  # rclpy's RMWError and what a bad buffer raises
+            raise InstanceError(f"a {self.cls.__name__} whose bytes do not read: {exc}") from None
 
 
 _GRAPH_BYTES = _Serialized(TaskGraph, Task, _TASK_FIELDS)
@@ -350,8 +351,8 @@ class GraphReader(_Reader):
         """:meth:`read` of a TaskGraph's serialized bytes (a raw subscription's), without a
         message object per task."""
         v = _GRAPH_BYTES.values(data)
-        if v is None:
-            return self.read(deserialize_message(data, TaskGraph))
+        if not isinstance(v, dict):
+            return self.read(v)
         tasks = self._items(v["tasks"], _GRAPH_BYTES.key, _GRAPH_BYTES.fields, _task_of_fields, _same)
         return GraphSnapshot(_seconds(v["header.stamp.sec"], v["header.stamp.nanosec"]), v["capability_names"],
                              tasks, tuple(v["sites"]), v["site_distances"], v["trait_names"], v["roles"],
@@ -373,8 +374,8 @@ class TeamReader(_Reader):
     def read_serialized(self, data: bytes) -> TeamSnapshot:
         """:meth:`read` of a TeamState's serialized bytes, as :meth:`GraphReader.read_serialized`."""
         v = _TEAM_BYTES.values(data)
-        if v is None:
-            return self.read(deserialize_message(data, TeamState))
+        if not isinstance(v, dict):
+            return self.read(v)
         robots = self._items(v["robots"], _TEAM_BYTES.key, _TEAM_BYTES.fields, _robot_of_fields, _same)
         return TeamSnapshot(_seconds(v["header.stamp.sec"], v["header.stamp.nanosec"]), v["capability_names"],
                             robots, v["trait_names"])

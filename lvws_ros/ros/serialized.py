@@ -8,9 +8,11 @@ generated message class itself (``SLOT_TYPES``, the ``rosidl_parser`` definition
 fields), so it follows the ``.msg`` files, and the encoding is plain CDR, little-endian
 (the encapsulation ``CDR_LE``, the one the Jazzy middlewares write): primitives aligned to
 their size from the start of the payload, strings and sequences a 32-bit length first.
-Bytes in another encapsulation, and classes with fields this does not read (wide strings,
-arrays of strings or messages), are not read here: :meth:`Layout.read` returns ``None``
-and the caller deserializes them with rclpy.
+Bytes in another encapsulation are not read here (:meth:`Layout.read` returns ``None``),
+nor are classes with fields this does not read (:func:`layout_of` raises Unreadable: bytes,
+chars, wide strings, arrays of strings or of messages); their callers deserialize them with
+rclpy. Where rclpy would read a string otherwise than its bytes say (no NUL at its end, or
+one inside it), :meth:`Layout.read` raises ValueError, so that rclpy's reading decides.
 
 A message reads as one flat tuple: nested messages (not in sequences) inline, in field
 order (``header.stamp.sec``, ``header.stamp.nanosec``, ``header.frame_id``, ...); a
@@ -44,21 +46,34 @@ class Unreadable(Exception):
     """A field type this reader does not take (the caller lets rclpy deserialize)."""
 
 
+def _align(pos: int, width: int) -> int:
+    """``pos`` moved on to the next multiple of ``width`` (1, 2, 4 or 8) from the payload's start."""
+    return pos + (-(pos - _BASE) & (width - 1))
+
+
+def _count(buf: bytes, pos: int) -> tuple[int, int]:
+    """A string's or a sequence's 32-bit length, and the position after it."""
+    pos = _align(pos, 4)
+    return _U32(buf, pos)[0], pos + 4
+
+
 def _string_step(buf: bytes, pos: int, out: list) -> int:
-    pos += -(pos - _BASE) & 3
-    n, = _U32(buf, pos)
-    pos += 4
+    n, pos = _count(buf, pos)
     end = pos + n
     if end > len(buf):
         raise ValueError(f"a string of {n} bytes at {pos} runs past the end ({len(buf)} bytes)")
-    out.append(str(buf[pos:end - 1 if n else end], "utf-8"))
+    if not n:
+        out.append("")
+        return end
+    s = str(buf[pos:end - 1], "utf-8")
+    if buf[end - 1] or "\0" in s:
+        raise ValueError(f"the string at {pos} is not ended by its only NUL")
+    out.append(s)
     return end
 
 
 def _strings_step(buf: bytes, pos: int, out: list) -> int:
-    pos += -(pos - _BASE) & 3
-    n, = _U32(buf, pos)
-    pos += 4
+    n, pos = _count(buf, pos)
     items: list = []
     for _ in range(n):
         pos = _string_step(buf, pos, items)
@@ -73,15 +88,13 @@ def _numbers_step(code: str, size: int | None) -> Step:
 
     def step(buf: bytes, pos: int, out: list) -> int:
         if size is None:
-            pos += -(pos - _BASE) & 3
-            n, = _U32(buf, pos)
-            pos += 4
+            n, pos = _count(buf, pos)
         else:
             n = size
         if not n:
             out.append(())
             return pos
-        pos += -(pos - _BASE) & (width - 1)
+        pos = _align(pos, width)
         end = pos + n * width
         if end > len(buf):
             raise ValueError(f"{n} items of {width} bytes at {pos} run past the end ({len(buf)} bytes)")
@@ -93,9 +106,8 @@ def _numbers_step(code: str, size: int | None) -> Step:
 def _messages_step(layout: Layout) -> Step:
     """A sequence of messages: a list of flat tuples."""
     def step(buf: bytes, pos: int, out: list) -> int:
-        pos += -(pos - _BASE) & 3
-        n, = _U32(buf, pos)
-        items, pos = layout.read_many(buf, pos + 4, n)
+        n, pos = _count(buf, pos)
+        items, pos = layout.read_many(buf, pos, n)
         out.append(items)
         return pos
     return step
@@ -109,7 +121,7 @@ def _fixed(codes: list[str]) -> Step:
     unpack, size = layout.unpack_from, layout.size
 
     def step(buf: bytes, pos: int, out: list) -> int:
-        pos += -(pos - _BASE) & (first - 1)
+        pos = _align(pos, first)
         out.extend(unpack(buf, pos))
         return pos + size
     return step
@@ -120,7 +132,10 @@ def _narrow_string(t: Any) -> bool:
 
 
 def _message_class(t: definition.NamespacedType) -> Any:
-    return getattr(importlib.import_module(".".join(t.namespaces)), t.name)
+    try:
+        return getattr(importlib.import_module(".".join(t.namespaces)), t.name)
+    except (ImportError, AttributeError):  # a type only its action's or service's module knows
+        raise Unreadable(f"a field of type {'/'.join((*t.namespaces, t.name))}") from None
 
 
 class Layout:
@@ -139,6 +154,8 @@ class Layout:
                 codes.clear()
 
         def add(prefix: str, msg_cls: Any) -> None:
+            if not msg_cls.SLOT_TYPES:  # an empty message is one byte on the wire
+                codes.append("x")
             for name, t in zip(msg_cls.get_fields_and_field_types(), msg_cls.SLOT_TYPES, strict=True):
                 if isinstance(t, definition.BasicType) and t.typename in _CODES:
                     code = _CODES[t.typename]
@@ -176,10 +193,8 @@ class Layout:
 
     def read_one(self, buf: bytes, pos: int) -> tuple[tuple[Any, ...], int]:
         """The message at ``pos`` of a payload (a flat tuple), and the position after it."""
-        out: list = []
-        for step in self.steps:
-            pos = step(buf, pos, out)
-        return tuple(out), pos
+        items, pos = self.read_many(buf, pos, 1)
+        return items[0], pos
 
     def read_many(self, buf: bytes, pos: int, n: int) -> tuple[list[tuple[Any, ...]], int]:
         """``n`` messages one after the other from ``pos``."""

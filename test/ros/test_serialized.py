@@ -119,6 +119,43 @@ def test_bytes_that_end_too_soon_are_refused_naming_the_message() -> None:
             GraphReader().read_serialized(data[:cut])
 
 
+def test_bytes_rclpy_cannot_read_either_are_refused_naming_the_message() -> None:
+    for bad in (b"", b"\x00", b"\x00\x00\x00\x00", bytes(7)):
+        with pytest.raises(InstanceError, match="TaskGraph"):
+            GraphReader().read_serialized(bad)
+        with pytest.raises(InstanceError, match="TeamState"):
+            TeamReader().read_serialized(bad)
+
+
+@pytest.mark.parametrize("text", ["a\x00", "abc"])
+def test_a_string_rclpy_reads_otherwise_than_its_bytes_is_read_as_rclpy_reads_it(text: str) -> None:
+    """A string whose last byte is not its NUL, or with a NUL inside (hostile bytes):
+    rclpy's reading decides, so the node sees what any other reader of the topic sees."""
+    data = bytearray(serialize_message(TaskGraph(objective="ab")))
+    at = data.rfind(b"ab\x00")
+    data[at:at + 3] = text.encode()
+    with pytest.raises(ValueError, match="NUL"):
+        layout_of(TaskGraph).read(bytes(data))
+    assert GraphReader().read_serialized(bytes(data)) == graph_from_msg(deserialize_message(bytes(data), TaskGraph))
+
+
+def test_an_empty_message_takes_its_one_byte() -> None:
+    """CDR gives a message without fields one byte: what follows it stays aligned."""
+    from lifecycle_msgs.msg import State
+    from lifecycle_msgs.srv import GetState
+
+    event = GetState.Event(request=[GetState.Request()], response=[GetState.Response(current_state=State(id=3,
+                                                                                                           label="x"))])
+    assert read_back(event) == flat(event)
+
+
+def test_a_field_type_only_its_action_knows_is_not_read_here() -> None:
+    from lvws_msgs.action import ExecuteTask
+
+    with pytest.raises(Unreadable):
+        layout_of(ExecuteTask.Impl.SendGoalService.Request)
+
+
 def test_another_encapsulation_is_left_to_rclpy() -> None:
     data = serialize_message(graph_to_msg(graph()))
     assert layout_of(TaskGraph).read(b"\x00\x00" + data[2:]) is None  # big-endian CDR: not read here
