@@ -28,7 +28,9 @@ from typing import Any
 
 from rosidl_parser import definition
 
-__all__ = ["CDR_LE", "Layout", "layout_of"]
+from lvws_ros.errors import LvwsError
+
+__all__ = ["CDR_LE", "Layout", "Unreadable", "layout_of"]
 
 CDR_LE = b"\x00\x01"  # the encapsulation identifier of plain little-endian CDR
 _BASE = 4  # alignment counts from the end of the 4-byte encapsulation header
@@ -42,7 +44,7 @@ _U32 = struct.Struct("<I").unpack_from
 Step = Callable[[bytes, int, list], int]  # reads its fields at a position into a list; the position after them
 
 
-class Unreadable(Exception):
+class Unreadable(LvwsError):
     """A field type this reader does not take (the caller lets rclpy deserialize)."""
 
 
@@ -84,7 +86,7 @@ def _strings_step(buf: bytes, pos: int, out: list) -> int:
 def _numbers_step(code: str, size: int | None) -> Step:
     """A sequence of primitives of ``code`` (``size`` None: its 32-bit length first) or an
     array of ``size`` of them, aligned to their size when there are any."""
-    width = struct.calcsize(code)
+    width, octets = struct.calcsize(code), code == "B"
 
     def step(buf: bytes, pos: int, out: list) -> int:
         if size is None:
@@ -98,7 +100,7 @@ def _numbers_step(code: str, size: int | None) -> Step:
         end = pos + n * width
         if end > len(buf):
             raise ValueError(f"{n} items of {width} bytes at {pos} run past the end ({len(buf)} bytes)")
-        out.append(tuple(buf[pos:end]) if code == "B" else struct.unpack_from(f"<{n}{code}", buf, pos))
+        out.append(tuple(buf[pos:end]) if octets else struct.unpack_from(f"<{n}{code}", buf, pos))
         return end
     return step
 
@@ -142,8 +144,6 @@ class Layout:
     """How the serialized bytes of one message class read (see the module's text)."""
 
     def __init__(self, cls: Any) -> None:
-        self.names: tuple[str, ...] = ()
-        self.steps: tuple[Step, ...] = ()
         names: list[str] = []
         steps: list[Step] = []
         codes: list[str] = []  # primitives waiting to be read in one step
@@ -174,7 +174,8 @@ class Layout:
                     names.append(prefix + name)
         add("", cls)
         flush()
-        self.names, self.steps = tuple(names), tuple(steps)
+        self.names: tuple[str, ...] = tuple(names)
+        self.steps: tuple[Step, ...] = tuple(steps)
 
     @staticmethod
     def _step(t: Any) -> Step:
@@ -210,7 +211,8 @@ class Layout:
     def read(self, data: bytes) -> tuple[Any, ...] | None:
         """The serialized message ``data`` (4 bytes of encapsulation, then the payload) as a
         flat tuple; ``None`` for an encapsulation other than plain little-endian CDR.
-        ValueError for bytes that end too soon or hold a string that is not UTF-8."""
+        ValueError for bytes that end too soon, or hold a string that is not UTF-8 or that
+        rclpy would read otherwise (module text)."""
         if bytes(data[:2]) != CDR_LE:
             return None
         try:
