@@ -43,13 +43,14 @@ def _auto(seed: int, options: dict[str, Any]) -> Policy:
     else the search within each decision's budget."""
     if options.get("budget_ms") is None and (options.get("time_limit") is not None
                                              or options.get("iterations") is not None or options.get("background")):
-        from lvws_ros.planning.auto import DEFAULT_TIME_LIMIT, FIRST_WAIT, PlannedAutoPolicy
+        from lvws_ros.planning.auto import DEFAULT_TIME_LIMIT, FIRST_WAIT, PLANNER_NICENESS, PlannedAutoPolicy
 
         limit = options.get("time_limit")
         return PlannedAutoPolicy(model_path=_model_path(options), seed=seed, background=bool(options.get("background")),
                                  time_limit=DEFAULT_TIME_LIMIT if limit is None else float(limit),
                                  workers=options.get("workers") or 8, iterations=options.get("iterations"),
-                                 first_wait=float(options.get("first_wait", FIRST_WAIT)))
+                                 first_wait=float(options.get("first_wait", FIRST_WAIT)),
+                                 niceness=int(options.get("niceness", PLANNER_NICENESS)))
     from lvws_ros.learning.sampling import DEFAULT_SAMPLES, DEFAULT_TEMPERATURE
     from lvws_ros.planning.budgeted import DEFAULT_BUDGET_MS, AutoPolicy
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 
 from lvws_ros.core.executor import TaskStatus
 from lvws_ros.core.online import (
+    CellDelta,
     GraphSnapshot,
     RobotInfo,
     TaskInfo,
@@ -141,6 +142,11 @@ class LiveCell:
                 self.dependents.setdefault(p, set()).add(t.id)
         self.done: set[str] = {t.id for t in graph.tasks if t.status == _DONE}  # candidates to retire
         self._snaps: tuple[TeamSnapshot, GraphSnapshot] | None = (team, graph)
+        self._viewed: tuple[TeamSnapshot, GraphSnapshot] | None = None  # the pair view() gave last (None: a new cell)
+        self._tasks_changed: set[str] = set()  # since then (view())
+        self._tasks_gone: dict[str, int] = {}
+        self._robots_changed: set[str] = set()
+        self._robots_left: set[str] = set()
 
     # -- taking a batch ----------------------------------------------------------------
     def apply(self, ch: CellChanges) -> None:
@@ -216,6 +222,8 @@ class LiveCell:
             self.retired_count += 1
         for r in ch.robots:
             self.robots[r.id] = r
+            self._robots_changed.add(r.id)
+            self._robots_left.discard(r.id)
             if r.busy_for > 0:
                 self.until[r.id] = ch.stamp + r.busy_for
             else:
@@ -223,6 +231,8 @@ class LiveCell:
         for rid in ch.left:
             self.robots.pop(rid)
             self.until.pop(rid, None)
+            self._robots_left.add(rid)
+            self._robots_changed.discard(rid)
         self.stamp = max(self.stamp, ch.stamp)
         self._snaps = None
 
@@ -235,6 +245,8 @@ class LiveCell:
             for p in t.prerequisites:
                 self.dependents.setdefault(p, set()).add(t.id)
         self.tasks[t.id] = t
+        self._tasks_changed.add(t.id)
+        self._tasks_gone.pop(t.id, None)
         if t.status == _DONE:
             self.done.add(t.id)
         else:
@@ -245,12 +257,15 @@ class LiveCell:
         t = self.tasks.pop(tid, None)
         if t is None:
             return
+        self._tasks_changed.discard(tid)
+        self._tasks_gone[tid] = t.status
         for p in t.prerequisites:
             self.dependents.get(p, set()).discard(tid)
         for d in self.dependents.pop(tid, set()):
             dep = self.tasks.get(d)
             if dep is not None:
                 self.tasks[d] = replace(dep, prerequisites=tuple(p for p in dep.prerequisites if p != tid))
+                self._tasks_changed.add(d)
         self.done.discard(tid)
 
     # -- what a decision reads ---------------------------------------------------------
@@ -264,6 +279,25 @@ class LiveCell:
             self._snaps = (replace(self.team_base, stamp=now, robots=robots),
                            replace(self.graph_base, stamp=now, tasks=tuple(self.tasks.values())))
         return self._snaps
+
+    def view(self) -> tuple[TeamSnapshot, GraphSnapshot, CellDelta]:
+        """The cell as a snapshot pair with what changed since the pair the last call gave,
+        for :meth:`~lvws_ros.core.online.OnlineScheduler.offer_cell`: in time proportional
+        to the change (the robots as their batches gave them: ``busy_for`` as of each one's
+        batch, the delta's ``until`` says when each busy robot is free)."""
+        now = self.stamp
+        team = replace(self.team_base, stamp=now, robots=tuple(self.robots.values()))
+        graph = replace(self.graph_base, stamp=now, tasks=tuple(self.tasks.values()))
+        changed = self._tasks_changed
+        watch = set(changed)
+        for tid in changed:
+            watch.update(self.dependents.get(tid, ()))
+        delta = CellDelta(self._viewed, frozenset(changed), dict(self._tasks_gone), frozenset(self._robots_changed),
+                          frozenset(self._robots_left), frozenset(watch), dict(self.tasks), dict(self.until),
+                          self.graph_base)
+        self._viewed = (team, graph)
+        self._tasks_changed, self._tasks_gone, self._robots_changed, self._robots_left = set(), {}, set(), set()
+        return team, graph, delta
 
     # -- retiring done work ------------------------------------------------------------
     def retire(self, horizon: float) -> list[str]:

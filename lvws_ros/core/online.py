@@ -133,6 +133,26 @@ class OnlineDecision:
     published: float = 0.0  # its stamp: when it went out on the node's clock, never before its inputs (0: unknown)
 
 
+@dataclass(frozen=True)
+class CellDelta:
+    """What changed in a cell since the snapshot pair ``since`` (as a
+    :class:`~lvws_ros.core.changes.LiveCell` that took numbered changes says it):
+    :meth:`OnlineScheduler.offer_cell` takes the pair after it in time proportional to
+    this, not to the cell, when ``since`` is the pair it holds. The snapshots it comes with
+    were checked batch by batch; their robots' ``busy_for`` is as of the batch that last
+    changed each, and ``until`` says when each busy robot is free (the cell's clock)."""
+
+    since: tuple[TeamSnapshot, GraphSnapshot] | None  # None: the whole cell is new (a resync)
+    tasks: frozenset[str]  # tasks added or changed (a prerequisite that left included)
+    gone: Mapping[str, int]  # tasks that left -> their last status (DONE: retired, else cancelled)
+    robots: frozenset[str]  # robots that joined or changed
+    left: frozenset[str]  # robots that left
+    watch: frozenset[str]  # tasks whose readiness may have changed: ``tasks`` and what waits on them
+    by_id: Mapping[str, TaskInfo]  # the new graph's tasks by id
+    until: Mapping[str, float]  # busy robots' end times
+    checked: GraphSnapshot | None = None  # passed check_graph: its tasks (the same objects) are not checked again
+
+
 def _finite(value: float, where: str, low: float = 0.0, high: float = MAX_VALUE) -> None:
     if not (math.isfinite(value) and low <= value <= high):
         raise InstanceError(f"{where}: {value!r} is not a finite number in [{low:g}, {high:g}]")
@@ -473,38 +493,69 @@ def unready(graph: GraphSnapshot) -> list[tuple[str, str]]:
 
 
 def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
-                pending: Mapping[str, Sequence[str]] = {}) -> State:
+                pending: Mapping[str, Sequence[str]] = {}, until: Mapping[str, float] | None = None,
+                columns: TaskColumns | None = None) -> State:
     """The executor state at the newer snapshot's time, with ``pending`` (task -> robots
     assigned but not yet acknowledged) counted as running (the rules of the module doc).
     With ``"departure": "each"`` a task the world took starts when it says (its members
     report themselves busy until their last task ends, at its site), and a pending one is
-    given as the executor gives it, in the order it was sent (:meth:`State.start`)."""
+    given as the executor gives it, in the order it was sent (:meth:`State.start`).
+    ``until``: busy robots' end times (a :class:`CellDelta`'s), in place of their
+    ``busy_for``; ``columns``: what the last snapshot's tasks gave, kept (:class:`TaskColumns`)."""
     if inst.departure == "each":
-        state = _build_state(inst, team, graph, {}, ahead=True)
+        state = _build_state(inst, team, graph, {}, until, columns, ahead=True)
         for tid, robots in pending.items():
             j = inst.task_index.get(tid)
             if j is not None and state.task_status[j] == TaskStatus.READY and all(r in inst.robot_index for r in robots):
                 state.start(j, [inst.robot_index[r] for r in robots])
         return state
-    return _build_state(inst, team, graph, pending)
+    return _build_state(inst, team, graph, pending, until, columns)
+
+
+class TaskColumns:
+    """What a graph's tasks give an executor state, per task place: the status as the
+    graph says it, the members' indices and the start time (NaN: none). Kept from one
+    snapshot to the next of the same instance: a task that is the very same object as
+    last time (an incremental reader or a live cell keeps them) is not read again."""
+
+    def __init__(self) -> None:
+        self.inst: Instance | None = None
+        self.tasks: Sequence[TaskInfo] = ()
+        self.status = np.zeros(0, dtype=np.int8)
+        self.start = np.zeros(0)
+        self.teams: list[tuple[int, ...]] = []
+
+    def read(self, inst: Instance, tasks: Sequence[TaskInfo]) -> tuple[np.ndarray, list[tuple[int, ...]], np.ndarray]:
+        """(status, teams, start) of ``tasks`` (copies the caller may change)."""
+        m = len(tasks)
+        if inst is not self.inst or len(self.tasks) != m:
+            self.inst, self.status, self.start, self.teams = inst, np.zeros(m, dtype=np.int8), np.full(m, np.nan), [()] * m
+            places: Sequence[int] = range(m)
+        else:
+            places = _changed(tasks, self.tasks)
+        index = inst.robot_index
+        for j in places:
+            t = tasks[j]
+            self.status[j] = t.status
+            self.teams[j] = tuple(index[r] for r in t.assigned_robots if r in index) if t.assigned_robots else ()
+            self.start[j] = np.nan if t.start is None else t.start
+        self.tasks = tasks
+        return self.status.copy(), list(self.teams), self.start
 
 
 def _build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot, pending: Mapping[str, Sequence[str]],
+                 until: Mapping[str, float] | None = None, columns: TaskColumns | None = None,
                  ahead: bool = False) -> State:
     now = max(team.stamp, graph.stamp)
-    m, n = inst.num_tasks, inst.num_robots
+    n = inst.num_robots
     tasks = graph.tasks
-    status = np.fromiter([t.status for t in tasks], dtype=np.int8, count=m)
-    done = {tasks[j].id for j in np.flatnonzero(status == _DONE).tolist()}
-    for k in np.flatnonzero(status == _READY).tolist():
-        if not done.issuperset(tasks[k].prerequisites):
+    status, teams, given = (columns or TaskColumns()).read(inst, tasks)
+    places = inst.task_index
+    for k in np.flatnonzero(status == _READY).tolist():  # ready only once every prerequisite is DONE
+        if any(p not in places or status[places[p]] != _DONE for p in tasks[k].prerequisites):
             status[k] = _QUEUED
-    index = inst.robot_index
-    teams: list[tuple[int, ...]] = [()] * m
-    for k in [k for k, t in enumerate(tasks) if t.assigned_robots]:
-        teams[k] = tuple(index[r] for r in tasks[k].assigned_robots if r in index)
     for tid, robots in pending.items():
-        j = inst.task_index.get(tid)
+        j = places.get(tid)
         if j is not None and status[j] == TaskStatus.READY and all(r in inst.robot_index for r in robots):
             status[j] = TaskStatus.ASSIGNED
             teams[j] = tuple(inst.robot_index[r] for r in robots)
@@ -512,30 +563,29 @@ def _build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot, pendi
     unknown_busy = max(float(inst.durations.max(initial=0.0)), BUSY_EPS)
     for i, r in enumerate(team.robots):
         if not r.available or r.current_task:
-            busy = float(r.busy_for) if math.isfinite(r.busy_for) else unknown_busy
-            free_at[i] = now + max(busy, BUSY_EPS)
-    start = np.full(m, np.nan)
+            busy = r.busy_for if until is None else max(0.0, until[r.id] - now) if r.id in until else r.busy_for
+            free_at[i] = now + max(busy if math.isfinite(busy) else unknown_busy, BUSY_EPS)
+    start = np.full(len(tasks), np.nan)
+    done = status == _DONE
+    start[done] = np.where(np.isnan(given[done]), now - inst.durations[done], given[done])
     tr = inst.travel
     own = _robot_sites(inst, team)  # where each robot says it is
     site = None if own is None else own.copy()  # and where it will be when its task is done
-    for j in np.flatnonzero(status >= _ASSIGNED).tolist():
-        t = graph.tasks[j]
-        if status[j] == _ASSIGNED and ahead and t.start is not None:  # the world says when it starts
+    for j in np.flatnonzero(status == _ASSIGNED).tolist():
+        t = tasks[j]
+        idx = list(teams[j])
+        if ahead and t.start is not None:  # the world says when it starts
             start[j] = t.start
-            idx = list(teams[j])
             free_at[idx] = np.maximum(free_at[idx], t.start + inst.durations[j])
-        elif status[j] == _ASSIGNED:
-            idx = list(teams[j])
-            busy_until = [free_at[i] for i in idx if free_at[i] > now]
-            # just assigned, or unacknowledged: the subteam travels first (travel extension)
-            go = tr.arrival(idx, [int(own[i]) for i in idx], j) if tr is not None and own is not None else 0.0
-            end = max(busy_until) if busy_until else now + go + inst.durations[j]
-            free_at[idx] = np.maximum(free_at[idx], end)
-            start[j] = end - inst.durations[j]
-            if tr is not None and site is not None and not ahead:  # ahead: each robot says where it ends
-                site[idx] = tr.task_to[j]
-        else:  # done
-            start[j] = t.start if t.start is not None else now - inst.durations[j]
+            continue
+        busy_until = [free_at[i] for i in idx if free_at[i] > now]
+        # just assigned, or unacknowledged: the subteam travels first (travel extension)
+        go = tr.arrival(idx, [int(own[i]) for i in idx], j) if tr is not None and own is not None else 0.0
+        end = max(busy_until) if busy_until else now + go + inst.durations[j]
+        free_at[idx] = np.maximum(free_at[idx], end)
+        start[j] = end - inst.durations[j]
+        if tr is not None and site is not None and not ahead:  # ahead: each robot says where it ends
+            site[idx] = tr.task_to[j]
     return State(inst, now, free_at, status, start, teams, robot_site=site)
 
 
@@ -550,16 +600,18 @@ def _robot_sites(inst: Instance, team: TeamSnapshot) -> np.ndarray | None:
                     dtype=np.int64)
 
 
-def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: GraphSnapshot, now: float,
-                  ack_timeout: float, team: TeamSnapshot | None = None) -> dict[str, tuple[tuple[str, ...], float]]:
+def still_pending(pending: Mapping[str, tuple[tuple[str, ...], float]], graph: GraphSnapshot | Mapping[str, TaskInfo],
+                  now: float, ack_timeout: float, team: TeamSnapshot | Set[str] | None = None
+                  ) -> dict[str, tuple[tuple[str, ...], float]]:
     """The assignments (task -> (robots, since)) the world has not acknowledged yet: a
     task no longer READY was acknowledged (or is gone); one not taken ``ack_timeout``
     seconds after ``since`` (:func:`sent_at`) is offered again; one whose robots left
-    ``team`` is released."""
-    status = {t.id: t.status for t in graph.tasks}
-    robots = None if team is None else {r.id for r in team.robots}
-    return {k: v for k, v in pending.items() if status.get(k) == TaskStatus.READY and now - v[1] <= ack_timeout
-            and (robots is None or set(v[0]) <= robots)}
+    ``team`` is released. ``graph`` and ``team`` may be given as the tasks by id and the
+    robots' ids."""
+    tasks = {t.id: t for t in graph.tasks} if isinstance(graph, GraphSnapshot) else graph
+    robots = {r.id for r in team.robots} if isinstance(team, TeamSnapshot) else team
+    return {k: v for k, v in pending.items() if k in tasks and tasks[k].status == _READY
+            and now - v[1] <= ack_timeout and (robots is None or set(v[0]) <= robots)}
 
 
 PUBLISHED_WITHIN = 86_400.0  # a decision stamped further than this after its inputs' time is on another clock
@@ -661,6 +713,10 @@ class OnlineScheduler:
         self._held: list[str] = []  # tasks held back (no present subteam can cover them)
         self._seen_free: frozenset[str] = frozenset()
         self._seen_ready: frozenset[str] = frozenset()
+        self._until: Mapping[str, float] | None = None  # busy robots' end times (offer_cell), else their busy_for
+        self._by_id: Mapping[str, TaskInfo] | None = None  # self.graph's tasks by id (made when needed)
+        self._robot_ids: frozenset[str] | None = None  # self.team's robots' ids (made when needed)
+        self._columns = TaskColumns()
 
     def set_policies(self, policy: Policy, fallback: Policy | None) -> None:
         """Switch policies (a runtime parameter change): the next decision resets them on
@@ -690,6 +746,7 @@ class OnlineScheduler:
                             f"stamp order reset, {len(self.pending)} pending assignment(s) released")
         self.pending.clear()
         self.team, self.graph = None, None  # both are of the old world: wait for the new world's
+        self._until = self._by_id = self._robot_ids = None
         self._seen_free, self._seen_ready = frozenset(), frozenset()
         return True
 
@@ -705,7 +762,7 @@ class OnlineScheduler:
                                     "not scheduled until they come back")
             if now - before:
                 self.changes.append(f"robot(s) {', '.join(sorted(now - before))} joined the team")
-        self.team = snap
+        self.team, self._until, self._robot_ids = snap, None, None
         return True
 
     def offer_graph(self, snap: GraphSnapshot, checked: GraphSnapshot | None = None) -> bool:
@@ -727,18 +784,77 @@ class OnlineScheduler:
                           and k in before and before[k].status == _ASSIGNED)
             if back:
                 self.notices.append(f"task(s) {', '.join(back)} interrupted: READY again, replanned")
-        self.graph = snap
+        self.graph, self._by_id = snap, None
         for task, pre in unready(snap):
             self.notices.append(f"TaskGraph says {task} is READY but its prerequisite {pre} is not DONE: not ready")
         return True
+
+    def offer_cell(self, team: TeamSnapshot, graph: GraphSnapshot, delta: CellDelta) -> bool:
+        """Take a live cell's snapshot pair (:class:`CellDelta`; checked where its changes
+        were taken): in time proportional to ``delta`` when it is of the pair held, else as
+        :meth:`offer_team` and :meth:`offer_graph` take them (InstanceError, pair ignored,
+        when it cannot be used). Whether it was taken. A READY task whose prerequisite is
+        not DONE is reported when it or the prerequisite changes."""
+        held = (self.team, self.graph)
+        if delta.since is None or held[0] is None or held[1] is None or delta.since[0] is not held[0] \
+                or delta.since[1] is not held[1] or team.stamp < held[0].stamp or graph.stamp < held[1].stamp:
+            if not (self.offer_team(team) and self.offer_graph(graph, delta.checked)):
+                return False
+            self._until, self._by_id = delta.until, delta.by_id
+            return True
+        ids = self._team_ids()
+        if delta.left:
+            self.notices.append(f"robot(s) {', '.join(sorted(delta.left))} left the team (failed?): "
+                                "not scheduled until they come back")
+        joined = sorted(delta.robots - ids)
+        if joined:
+            self.changes.append(f"robot(s) {', '.join(joined)} joined the team")
+        self._news(self._tasks_by_id(), delta)
+        self.team, self.graph = team, graph
+        self._until, self._by_id, self._robot_ids = delta.until, delta.by_id, (ids - delta.left) | delta.robots
+        by_id = delta.by_id
+        for tid in sorted(delta.watch):
+            t = by_id.get(tid)
+            for p in t.prerequisites if t is not None and t.status == _READY else ():
+                if p not in by_id or by_id[p].status != _DONE:
+                    self.notices.append(f"TaskGraph says {tid} is READY but its prerequisite {p} is not DONE: "
+                                        "not ready")
+        return True
+
+    def _news(self, before: Mapping[str, TaskInfo], delta: CellDelta) -> None:
+        """What a live cell's tasks did since ``before`` (tasks by id), for diagnostics."""
+        added = sorted(k for k in delta.tasks if k not in before)
+        if added:
+            self.changes.append(f"task(s) {', '.join(added)} added")
+        gone = sorted(k for k, status in delta.gone.items() if k in before and status != _DONE)
+        if gone:
+            self.changes.append(f"task(s) {', '.join(gone)} removed (cancelled)")
+        now = delta.by_id
+        back = sorted(k for k in delta.tasks if k in before and k in now and now[k].status == _READY
+                      and not now[k].assigned_robots and before[k].status == _ASSIGNED)
+        if back:
+            self.notices.append(f"task(s) {', '.join(back)} interrupted: READY again, replanned")
+
+    def _tasks_by_id(self) -> Mapping[str, TaskInfo]:
+        assert self.graph is not None
+        if self._by_id is None:
+            self._by_id = {t.id: t for t in self.graph.tasks}
+        return self._by_id
+
+    def _team_ids(self) -> frozenset[str]:
+        assert self.team is not None
+        if self._robot_ids is None:
+            self._robot_ids = frozenset(r.id for r in self.team.robots)
+        return self._robot_ids
 
     def _release(self, now: float) -> None:
         """Drop pending assignments that were acknowledged, timed out, or lost their task
         or robots; report the last two kinds."""
         assert self.team is not None and self.graph is not None
-        kept = still_pending(self.pending, self.graph, now, self.ack_timeout, self.team)
-        tasks = {t.id for t in self.graph.tasks}
-        robots = {r.id for r in self.team.robots}
+        if not self.pending:
+            return
+        tasks, robots = self._tasks_by_id(), self._team_ids()
+        kept = still_pending(self.pending, tasks, now, self.ack_timeout, robots)
         for task, (team, _) in self.pending.items():
             if task not in kept and (task not in tasks or not set(team) <= robots):
                 gone = [task] if task not in tasks else sorted(set(team) - robots)
@@ -788,7 +904,8 @@ class OnlineScheduler:
         now = max(self.team.stamp, self.graph.stamp)
         self._release(now)
         assert self._view is not None
-        state = build_state(inst, self.team, self._view, {k: v[0] for k, v in self.pending.items()})
+        state = build_state(inst, self.team, self._view, {k: v[0] for k, v in self.pending.items()}, self._until,
+                            self._columns)
         free = frozenset(inst.robots[i].id for i in state.free_robots())
         ready = frozenset(inst.tasks[j].id for j in state.ready_tasks())
         running = bool((state.task_status == TaskStatus.ASSIGNED).any())

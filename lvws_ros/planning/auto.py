@@ -32,6 +32,7 @@ from pathlib import Path
 from lvws_ros.core.executor import Decision, State
 from lvws_ros.core.problem import Instance
 from lvws_ros.errors import PolicyError
+from lvws_ros.planning import PLANNER_NICENESS
 from lvws_ros.planning.follow import PlanFollower
 from lvws_ros.planning.planner import Planner, PlanReport
 from lvws_ros.planning.worker import PlannerProcess, PlanUpdate
@@ -41,7 +42,7 @@ DEFAULT_TIME_LIMIT = 60.0  # seconds of planning offline
 FIRST_WAIT = 1.0  # seconds a decision waits for the first plan of a cell from the planner's process
 READY_WAIT = 3.0  # seconds the first decision waits, at most, for that process to have started (a loaded machine)
 
-__all__ = ["DEFAULT_TIME_LIMIT", "FIRST_WAIT", "PlannedAutoPolicy"]
+__all__ = ["DEFAULT_TIME_LIMIT", "FIRST_WAIT", "PLANNER_NICENESS", "PlannedAutoPolicy"]
 
 
 class PlannedAutoPolicy:
@@ -51,11 +52,13 @@ class PlannedAutoPolicy:
 
     def __init__(self, model_path: str | Path | None = None, seed: int = 0, time_limit: float = DEFAULT_TIME_LIMIT,
                  background: bool = False, workers: int = 8, learned: bool = True,
-                 first_wait: float = FIRST_WAIT, iterations: int | None = None) -> None:
+                 first_wait: float = FIRST_WAIT, iterations: int | None = None,
+                 niceness: int = PLANNER_NICENESS) -> None:
         if time_limit < 0 or first_wait < 0:
             raise PolicyError(f"auto: the time limit and the first wait must be >= 0, got {time_limit}, {first_wait}")
         self.options = {"model_path": model_path, "seed": seed, "workers": workers, "learned": learned}
         self.time_limit, self.iterations, self.first_wait = time_limit, iterations, first_wait
+        self.niceness = niceness  # the planner's process: this far below the caller's CPU priority
         self.background = background
         self.planner = Planner(**self.options)  # type: ignore[arg-type]
         self.process: PlannerProcess | None = None
@@ -71,7 +74,7 @@ class PlannedAutoPolicy:
         self.improved: dict[str, int] = {}
         self._cell: Instance | None = None
         if background:  # started now (a node's configure), so that it is ready when the cell's first state comes
-            self.process = PlannerProcess(**self.options)
+            self.process = PlannerProcess(niceness=self.niceness, **self.options)
             self.process.start()
 
     def warm_up(self) -> None:
@@ -90,7 +93,7 @@ class PlannedAutoPolicy:
             self.follower, self.report = None, None
             self.planner = Planner(**self.options)  # type: ignore[arg-type]
         elif self.process is None:
-            self.process = PlannerProcess(**self.options)
+            self.process = PlannerProcess(niceness=self.niceness, **self.options)
             self.process.start()
 
     def decide(self, state: State) -> Decision:
@@ -120,7 +123,7 @@ class PlannedAutoPolicy:
             if self.process is not None:
                 self.notices.append("the planner's process is gone: this decision is GRP's; starting it again")
                 self.restarts += 1
-            self.process = PlannerProcess(**self.options)
+            self.process = PlannerProcess(niceness=self.niceness, **self.options)
             self.process.start()
             self._cell = None  # the new process gets the cell; the plan followed so far stays until it sends one
         self._take(self.process.latest())

@@ -36,6 +36,7 @@ import numpy as np
 from lvws_ros.core.executor import State
 from lvws_ros.core.problem import Instance
 from lvws_ros.core.schedule import Schedule
+from lvws_ros.planning import PLANNER_NICENESS
 from lvws_ros.planning.planner import Clock, Planner, PlanReport
 
 QUICK_SECONDS = 60.0  # the child's quick plans from one state: at most this long in all
@@ -64,8 +65,10 @@ def _state(inst: Instance, p: StatePayload) -> State:
     return State(inst, p[0], p[1], p[2], p[3], list(p[4]), p[5], p[6])
 
 
-def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], parent: int) -> None:
+def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], parent: int, niceness: int = 0) -> None:
     """The child's loop (module docstring)."""
+    if niceness > 0:
+        os.nice(niceness)  # raising one's own niceness needs no privilege
     planner = Planner(**options)
     planner.clock = Clock.OPEN_ENDED
     if planner.learned:
@@ -132,8 +135,9 @@ class PlannerProcess:
     the child is handed to a sender thread that keeps only the newest state (and the cell
     it belongs to): a child busy with a long round never blocks the parent."""
 
-    def __init__(self, **options: Any) -> None:
+    def __init__(self, niceness: int = PLANNER_NICENESS, **options: Any) -> None:
         self.options = options
+        self.niceness = niceness  # the child's, above the parent's (0: the parent's priority)
         self.process: BaseProcess | None = None
         self.inbox: Connection | None = None  # plans from the child
         self.outbox: Connection | None = None  # cells and states to the child
@@ -150,7 +154,7 @@ class PlannerProcess:
         ctx = multiprocessing.get_context("spawn")
         to_child, into_child = ctx.Pipe(duplex=False)  # (read end, write end)
         from_child, out_of_child = ctx.Pipe(duplex=False)
-        self.process = ctx.Process(target=_serve, args=(to_child, out_of_child, self.options, os.getpid()),
+        self.process = ctx.Process(target=_serve, args=(to_child, out_of_child, self.options, os.getpid(), self.niceness),
                                    daemon=True, name="lvws-planner")
         self.process.start()
         to_child.close()

@@ -49,6 +49,7 @@ from lvws_ros.core.changes import ChangeFollower
 from lvws_ros.core.executor import Policy
 from lvws_ros.core.online import OnlineDecision, OnlineScheduler, close_policy
 from lvws_ros.errors import ConfigError, LvwsError
+from lvws_ros.planning import PLANNER_NICENESS
 from lvws_ros.registry import LEARNED_POLICIES, POLICY_NAMES, make_policy
 from lvws_ros.ros import convert, topics
 from lvws_ros.ros.change_feed import ChangeFeed
@@ -59,7 +60,8 @@ DESCRIPTION = (
     "LVWS scheduler node: subscribes to lvws/team_state and lvws/task_graph, publishes lvws/assignments "
     "(lvws_msgs/AssignmentArray) at every decision step, health on diagnostics; names are relative to the "
     "node's namespace. ROS parameters: " + ", ".join(
-        ["policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "first_plan_wait", "ack_timeout",
+        ["policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "first_plan_wait", "planner_niceness",
+         "ack_timeout",
          "retire_after", "expect_subscribers", "managed", "use_sim_time"])
     + " (--ros-args -p NAME:=VALUE or --params-file config/scheduler.yaml)."
 )
@@ -115,6 +117,10 @@ PARAMETERS: dict[str, Param] = {
     "first_plan_wait": Param(float, 0.0, "auto (planner beside the node): seconds the cell's first decision waits "
                                          "for the planner's first plan (0: it is GRP's at once, and the plan takes "
                                          "over when it comes)", 0.0, 60.0),
+    "planner_niceness": Param(int, PLANNER_NICENESS, "auto (planner beside the node): how far below the node's "
+                                                     "CPU priority its planner's process runs (os.nice; 0: the "
+                                                     "same), so that decisions are not held up by the plan's "
+                                                     "improvement on a machine with few cores", 0, 19),
     "ack_timeout": Param(float, 5.0, "seconds (of the world's clock, the states' stamps) before an assignment the "
                          "world did not take is offered again, from when the decision went out "
                          "(lvws_ros.core.online.sent_at)", 0.01, 3.6e6),
@@ -129,7 +135,7 @@ PARAMETERS: dict[str, Param] = {
     "use_sim_time": Param(bool, False, "rclpy's: the node's clock follows /clock"),
 }
 RUNTIME_POLICY_PARAMETERS = ("policy", "fallback_policy", "model_path", "seed", "decision_budget_ms", "beam_width",
-                             "samples", "first_plan_wait")
+                             "samples", "first_plan_wait", "planner_niceness")
 SUBSCRIBER_WAIT = 20.0  # wall seconds the first decision waits for expect_subscribers
 SETTLE_SECONDS = 0.2  # wall time to wait for the matching team/graph message
 LOG_NAMES = 12  # assignments and waiting robots named in a decision's log line (the rest counted)
@@ -216,7 +222,8 @@ def build_policies(values: dict[str, Any]) -> tuple[Policy, Policy | None]:
         options.update(sample)
     if name == "auto":  # with a budget: the search within each decision's; without: the planner beside the node
         options.update({"budget_ms": budget} if budget > 0 else
-                       {"background": True, "first_wait": float(values.get("first_plan_wait", 0.0))})
+                       {"background": True, "first_wait": float(values.get("first_plan_wait", 0.0)),
+                        "niceness": int(values.get("planner_niceness", PLANNER_NICENESS))})
     if name == "exact" and budget > 0:
         options["time_limit"] = budget / 1000
     fallback = values["fallback_policy"]
@@ -429,9 +436,8 @@ class SchedulerNode(LifecycleNode):
         cell, core = self.follower.cell, self.core
         if cell is None or core is None:
             return
-        team, graph = cell.snapshots()
-        self.offer("TeamState", lambda: core.offer_team(team))
-        self.offer("TaskGraph", lambda: core.offer_graph(graph, cell.graph_base))  # the base: checked at resync
+        team, graph, delta = cell.view()
+        self.offer("CellChanges", lambda: core.offer_cell(team, graph, delta))
 
     def resynced(self, res: Any) -> None:
         """The world's answer to a resync request (``None``: the call failed)."""

@@ -6,13 +6,22 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lvws_ros.core.changes import CellChanges, ChangeGap, ChangeRefused, LiveCell, changes_between, without_retired
-from lvws_ros.core.executor import TaskStatus
-from lvws_ros.core.online import GraphSnapshot, OnlineScheduler, RobotInfo, TaskInfo, TeamSnapshot
+from lvws_ros.core.executor import State, TaskStatus
+from lvws_ros.core.online import (
+    GraphSnapshot,
+    OnlineScheduler,
+    RobotInfo,
+    TaskColumns,
+    TaskInfo,
+    TeamSnapshot,
+    build_state,
+)
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 Q, R, A, D = (int(s) for s in (TaskStatus.QUEUED, TaskStatus.READY, TaskStatus.ASSIGNED, TaskStatus.DONE))
@@ -140,8 +149,8 @@ def test_changes_applied_one_by_one_give_the_snapshot_after_them(ops: list[tuple
     world = ToyWorld()
     before = world.snapshots()
     cell = LiveCell(*before)
-    direct, followed = OnlineScheduler(GreedyPayloadPolicy(), ack_timeout=1e9), \
-        OnlineScheduler(GreedyPayloadPolicy(), ack_timeout=1e9)
+    direct, followed, viewed = (OnlineScheduler(GreedyPayloadPolicy(), ack_timeout=1e9) for _ in range(3))
+    columns = TaskColumns()
     for seq, (op, args, k) in enumerate(ops, start=1):
         run_ops(world, op, args, k)
         world.time += 0.01  # every batch at its own time
@@ -153,11 +162,24 @@ def test_changes_applied_one_by_one_give_the_snapshot_after_them(ops: list[tuple
         for core, (team, graph) in ((direct, after), (followed, cell.snapshots())):
             core.offer_team(team)
             core.offer_graph(graph)
-        a, b = direct.decide(), followed.decide()  # the same node state decides the same
+        team, graph, delta = cell.view()  # in time proportional to the batch: the same state
+        assert viewed.offer_cell(team, graph, delta)
+        assert delta.since is not None or seq == 1
+        same_state(build_state(direct.instance(), *after), build_state(viewed.instance(), team, graph, {},
+                                                                       delta.until, columns))
+        a, b, c = direct.decide(), followed.decide(), viewed.decide()  # the same node state decides the same
         assert (a.assignments, a.waiting) == (b.assignments, b.waiting) if a and b else a is b is None
-        direct.pending.clear()
-        followed.pending.clear()
+        assert (a.assignments, a.waiting) == (c.assignments, c.waiting) if a and c else a is c is None
+        for core in (direct, followed, viewed):
+            core.pending.clear()
         before = after
+
+
+def same_state(a: State, b: State) -> None:
+    assert a.time == b.time and a.task_team == b.task_team
+    assert (a.task_status == b.task_status).all()
+    assert np.allclose(a.robot_free_at, b.robot_free_at, rtol=0, atol=1e-9)
+    assert np.allclose(a.task_start, b.task_start, rtol=0, atol=1e-9, equal_nan=True)
 
 
 def small_cell() -> LiveCell:

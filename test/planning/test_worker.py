@@ -90,3 +90,22 @@ def test_a_cell_pickled_while_its_cache_fills_is_sent_again_not_lost() -> None:
     assert reader.poll(1.0)
     kind, cell = reader.recv()
     assert kind == "cell" and isinstance(cell, _FilledWhilePickled)
+
+
+def test_the_planner_runs_below_its_parent_s_priority_as_asked() -> None:
+    # Decisions come first: the child lowers its own CPU priority (os.nice) by what it is
+    # given, PLANNER_NICENESS unless told otherwise; 0 keeps the parent's.
+    import os
+
+    from lvws_ros.planning import PLANNER_NICENESS
+
+    mine = os.getpriority(os.PRIO_PROCESS, 0)
+    for asked, expected in ((None, min(19, mine + PLANNER_NICENESS)), (0, mine), (3, min(19, mine + 3))):
+        proc = PlannerProcess(seed=0, workers=1, learned=False) if asked is None else \
+            PlannerProcess(niceness=asked, seed=0, workers=1, learned=False)
+        proc.start()
+        try:
+            assert proc.wait_ready(60.0) and proc.process is not None and proc.process.pid is not None
+            assert os.getpriority(os.PRIO_PROCESS, proc.process.pid) == expected
+        finally:
+            proc.stop()
