@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
 from lvws_ros.core.executor import Decision, State
 from lvws_ros.core.problem import Instance
@@ -56,11 +57,11 @@ class PlannedAutoPolicy:
                  niceness: int = PLANNER_NICENESS) -> None:
         if time_limit < 0 or first_wait < 0:
             raise PolicyError(f"auto: the time limit and the first wait must be >= 0, got {time_limit}, {first_wait}")
-        self.options = {"model_path": model_path, "seed": seed, "workers": workers, "learned": learned}
+        self.options: dict[str, Any] = {"model_path": model_path, "seed": seed, "workers": workers, "learned": learned}
         self.time_limit, self.iterations, self.first_wait = time_limit, iterations, first_wait
         self.niceness = niceness  # the planner's process: this far below the caller's CPU priority
         self.background = background
-        self.planner = Planner(**self.options)  # type: ignore[arg-type]
+        self.planner = Planner(**self.options)
         self.process: PlannerProcess | None = None
         self.follower: PlanFollower | None = None
         self.grp = GreedyPayloadPolicy(priority="critical-path")
@@ -74,7 +75,7 @@ class PlannedAutoPolicy:
         self.improved: dict[str, int] = {}
         self._cell: Instance | None = None
         if background:  # started now (a node's configure), so that it is ready when the cell's first state comes
-            self.process = PlannerProcess(niceness=self.niceness, **self.options)
+            self.process = PlannerProcess(niceness=self.niceness, prepare=self._prepare, **self.options)
             self.process.start()
 
     def warm_up(self) -> None:
@@ -91,9 +92,9 @@ class PlannedAutoPolicy:
         self.grp.reset(instance)
         if not self.background:
             self.follower, self.report = None, None
-            self.planner = Planner(**self.options)  # type: ignore[arg-type]
+            self.planner = Planner(**self.options)
         elif self.process is None:
-            self.process = PlannerProcess(niceness=self.niceness, **self.options)
+            self.process = PlannerProcess(niceness=self.niceness, prepare=self._prepare, **self.options)
             self.process.start()
 
     def decide(self, state: State) -> Decision:
@@ -109,13 +110,23 @@ class PlannedAutoPolicy:
             self.quick_makespan = self.planner.quick_makespan
         return self.follower.decide(state)
 
+    def _prepare(self, update: PlanUpdate) -> PlanFollower:
+        """A plan that arrived, made ready to follow on the cell of the latest decision
+        (the planner process's receiver thread, between decisions)."""
+        follower = PlanFollower(update.schedule)
+        cell = self._cell
+        if cell is not None:
+            follower.reset(cell)
+        return follower
+
     def _take(self, update: PlanUpdate | None) -> None:
         """Follow ``update`` when it was made from the newest state handed to the planner
         (or when there is no plan yet): a plan made from an older state has not seen the
         decisions since (the planner repairs it from the newest state and sends it again)."""
         assert self.process is not None
         if update is not None and (update.seq == self.process.sent or self.follower is None):
-            self.follower, self.report = PlanFollower(update.schedule), update.report
+            ready = update.prepared if isinstance(update.prepared, PlanFollower) else None
+            self.follower, self.report = ready or PlanFollower(update.schedule), update.report
             self.proven, self.improved = update.report.proven, dict(update.report.improved)
 
     def _decide_beside(self, state: State) -> Decision:
@@ -123,7 +134,7 @@ class PlannedAutoPolicy:
             if self.process is not None:
                 self.notices.append("the planner's process is gone: this decision is GRP's; starting it again")
                 self.restarts += 1
-            self.process = PlannerProcess(niceness=self.niceness, **self.options)
+            self.process = PlannerProcess(niceness=self.niceness, prepare=self._prepare, **self.options)
             self.process.start()
             self._cell = None  # the new process gets the cell; the plan followed so far stays until it sends one
         self._take(self.process.latest())

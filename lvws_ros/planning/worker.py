@@ -6,15 +6,17 @@ parent sends the cell when it changes and the state after each of its decisions;
 child plans from the newest state it has (older ones are skipped), sends the plan at once
 (the old plan carried out from the new state, :meth:`~lvws_ros.planning.planner.Planner.rebase`),
 then the quick plans when the world departed from the plan, then every improvement, and
-improves while nothing new arrives. The parent never waits for it: :meth:`PlannerProcess.latest`
-reads what has arrived. The child ends when told, when the pipe closes, or when its parent
+improves while nothing new arrives. The parent never waits for it: a receiver thread reads
+what arrives, unpickles only the newest plan and prepares it for use (``prepare``: the
+follower of ``auto``, mapped onto its cell), off the decision's path; :meth:`PlannerProcess.latest`
+hands over the newest. The child ends when told, when the pipe closes, or when its parent
 is gone.
 
 Messages (pickled over a one-way :func:`multiprocessing.Pipe` each way): to the child
 ``("cell", Instance)``, ``("state", seq, StatePayload)``, ``("stop",)``; to the parent
 ``("ready",)`` once, then ``("plan", bytes)``: a :class:`PlanUpdate` pickled by the child
-(``seq``: the number of the state the plan is made from), which :meth:`PlannerProcess.latest`
-unpickles only when it is the newest that arrived. As with every ``spawn`` start, a script
+(``seq``: the number of the state the plan is made from), which the receiver thread unpickles
+only when it is the newest that arrived. As with every ``spawn`` start, a script
 that starts the planner must guard its own work with ``if __name__ == "__main__":`` (the
 child imports the parent's main module); the package's entry points do.
 """
@@ -26,7 +28,8 @@ import os
 import pickle
 import threading
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import Any
@@ -54,6 +57,7 @@ class PlanUpdate:
     seq: int
     schedule: Schedule
     report: PlanReport
+    prepared: Any = field(default=None, compare=False)  # what the parent's ``prepare`` made of it
 
 
 def _payload(state: State) -> StatePayload:
@@ -114,6 +118,7 @@ def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], paren
             send()
 
 
+RECEIVE_POLL = 0.1  # seconds the receiver thread waits on the pipe between looks at whether it should stop
 PICKLE_TRIES = 100  # a cell pickled while the decision thread fills one of its caches is pickled again
 
 
@@ -133,11 +138,18 @@ def _send_pickled(conn: Connection, msg: tuple[Any, ...]) -> None:
 class PlannerProcess:
     """The parent's handle on the planner's child process (module docstring). What goes to
     the child is handed to a sender thread that keeps only the newest state (and the cell
-    it belongs to): a child busy with a long round never blocks the parent."""
+    it belongs to): a child busy with a long round never blocks the parent. What comes back
+    is read by a receiver thread, which keeps the newest plan, unpickled and made ready by
+    ``prepare`` (in that thread: the result is the caller's once :meth:`latest` hands it over)."""
 
-    def __init__(self, niceness: int = PLANNER_NICENESS, **options: Any) -> None:
+    def __init__(self, niceness: int = PLANNER_NICENESS, prepare: Callable[[PlanUpdate], Any] | None = None,
+                 **options: Any) -> None:
         self.options = options
         self.niceness = niceness  # the child's, above the parent's (0: the parent's priority)
+        self.prepare = prepare
+        self._arrived: PlanUpdate | None = None  # the newest plan, not handed over yet
+        self._receiver: threading.Thread | None = None
+        self._receiving = False  # the receiver thread reads the child's pipe
         self.process: BaseProcess | None = None
         self.inbox: Connection | None = None  # plans from the child
         self.outbox: Connection | None = None  # cells and states to the child
@@ -164,7 +176,40 @@ class PlannerProcess:
         self._sender = threading.Thread(target=self._send_loop, args=(into_child,), daemon=True,
                                         name="lvws-planner-sender")
         self._sender.start()
+        self._arrived, self._receiving = None, True
+        self._receiver = threading.Thread(target=self._receive_loop, args=(from_child,), daemon=True,
+                                          name="lvws-planner-receiver")
+        self._receiver.start()
         self.starts += 1
+
+    def _receive_loop(self, conn: Connection) -> None:
+        """Read what the child sends; keep the newest plan (older ones dropped unread: a
+        plan of 5,000 tasks takes ~10 ms to unpickle), prepared; wake whoever waits. Ends
+        at :meth:`stop` or when the child is gone."""
+        gone = False
+        while not (self._closed or gone):
+            newest: bytes | None = None
+            try:
+                while conn.poll(0 if newest is not None else RECEIVE_POLL):
+                    msg = conn.recv()
+                    if msg[0] == "plan":
+                        newest = msg[1]
+                    elif msg[0] == "ready":
+                        with self._wake:
+                            self.ready = True
+                            self._wake.notify_all()
+            except (EOFError, OSError):
+                gone = True
+            if newest is not None and not self._closed:
+                update: PlanUpdate = pickle.loads(newest)  # our own child's (the pipe's pickles are too)
+                if self.prepare is not None:
+                    update = replace(update, prepared=self.prepare(update))
+                with self._wake:
+                    self._arrived = update
+                    self._wake.notify_all()
+        with self._wake:
+            self._receiving = False
+            self._wake.notify_all()
 
     def _send_loop(self, conn: Connection) -> None:
         while True:
@@ -185,17 +230,9 @@ class PlannerProcess:
     def wait_ready(self, timeout: float) -> bool:
         """Wait at most ``timeout`` seconds for the child to have started (its imports and
         model loaded); True when it has."""
-        if self.ready:
-            return True
-        if self.inbox is None:
-            return False
-        try:
-            if self.inbox.poll(timeout):
-                msg = self.inbox.recv()
-                self.ready = msg[0] == "ready"
-        except (EOFError, OSError):
-            return False
-        return self.ready
+        with self._wake:
+            self._wake.wait_for(lambda: self.ready or not self._receiving, timeout)
+            return self.ready
 
     def alive(self) -> bool:
         return self.process is not None and self.process.is_alive()
@@ -219,26 +256,15 @@ class PlannerProcess:
     def latest(self, wait: float = 0.0) -> PlanUpdate | None:
         """The newest plan the child sent since the last call (None: none), waiting at most
         ``wait`` seconds for one."""
-        newest: bytes | None = None
-        if self.inbox is None:
-            return None
-        try:
-            end = time.perf_counter() + wait
-            while self.inbox.poll(max(0.0, end - time.perf_counter()) if newest is None else 0):
-                msg = self.inbox.recv()
-                if msg[0] == "plan":
-                    newest = msg[1]  # older plans are dropped unread (a plan of 5,000 tasks: ~10 ms to unpickle)
-                elif msg[0] == "ready":
-                    self.ready = True
-        except (EOFError, OSError):
-            pass
-        if newest is None:
-            return None
-        out: PlanUpdate = pickle.loads(newest)  # our own child's (the pipe's pickles are too)
+        with self._wake:
+            if self._arrived is None and wait > 0:
+                self._wake.wait_for(lambda: self._arrived is not None or not self._receiving, wait)
+            out, self._arrived = self._arrived, None
         return out
 
     def _drain(self, wait: float) -> None:
-        """Read and drop what the child has sent, waiting at most ``wait`` seconds for it."""
+        """Read and drop what the child has sent, waiting at most ``wait`` seconds for it
+        (at :meth:`stop`, the receiver thread ended)."""
         try:
             for _ in range(1000):  # a child sending without pause cannot hold this side here
                 if self.inbox is None or not self.inbox.poll(wait):
@@ -254,7 +280,9 @@ class PlannerProcess:
         would never read the stop (nor let the sender finish)."""
         with self._wake:
             self._closed = True
-            self._wake.notify()
+            self._wake.notify_all()
+        if self._receiver is not None:  # this side's pipe gets one reader at a time
+            self._receiver.join(2.0)
         end = time.perf_counter() + 2.0
         while self._sender is not None and self._sender.is_alive() and time.perf_counter() < end:
             self._drain(0.05)
@@ -274,4 +302,4 @@ class PlannerProcess:
         for conn in (self.inbox, self.outbox):
             if conn is not None:
                 conn.close()
-        self.process = self.inbox = self.outbox = self._sender = None
+        self.process = self.inbox = self.outbox = self._sender = self._receiver = None

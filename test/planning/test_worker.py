@@ -109,3 +109,25 @@ def test_the_planner_runs_below_its_parent_s_priority_as_asked() -> None:
             assert os.getpriority(os.PRIO_PROCESS, proc.process.pid) == expected
         finally:
             proc.stop()
+
+
+def test_a_plan_arrives_unpickled_and_prepared_off_the_caller_s_thread() -> None:
+    # What a decision would otherwise do when a plan arrives (unpickle it, map it onto the
+    # cell) is done by the receiver thread: latest() hands over the prepared plan.
+    inst = subteam_heavy_instance(np.random.default_rng(2), 10, 30, "prepared")
+    threads: list[str] = []
+
+    def prepare(update: object) -> str:
+        threads.append(threading.current_thread().name)
+        return "prepared"
+    proc = PlannerProcess(prepare=prepare, seed=0, workers=1, learned=False)
+    proc.start()
+    try:
+        assert proc.wait_ready(60.0)
+        proc.send(State.initial(inst))
+        update = proc.latest(30.0)
+        assert update is not None and update.seq == 1 and update.prepared == "prepared"
+        assert threads and all(name == "lvws-planner-receiver" for name in threads)
+    finally:
+        proc.stop()
+    assert proc._receiver is None
