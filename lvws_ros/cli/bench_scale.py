@@ -144,7 +144,6 @@ class _SnapshotWire:
 
         self.convert = convert
         self.team_reader, self.graph_reader = convert.TeamReader(), convert.GraphReader()
-        self.checked: Any = None  # a graph that passed the checks before the node's core saw one
 
     def send(self, team: Any, graph: Any, raw: bool = True) -> Any:
         """The messages of this state serialized (the world's work), and the node's reading
@@ -185,8 +184,7 @@ class _ChangeWire(_SnapshotWire):
                 first_team, first_graph = first()
                 follower.resync(first_team, first_graph, 0)
                 assert follower.cell is not None
-                self.checked = follower.cell.graph_base  # as the scheduler node offers it
-                return follower.cell.snapshots()
+                return follower.cell.view()  # as the scheduler node offers it
         else:
             self.seq += 1
             msg = self.convert.changes_to_msg(changes_between(self.sent, (team, graph), self.seq))
@@ -194,7 +192,7 @@ class _ChangeWire(_SnapshotWire):
             def read() -> Any:
                 follower.take(self.convert.changes_from_msg(msg))
                 assert follower.cell is not None
-                return follower.cell.snapshots()
+                return follower.cell.view()
         self.sent = (team, graph)
         return read
 
@@ -232,9 +230,12 @@ def node_latency(policy: str, family: str, n: int, m: int, seed: int, warm_up: b
     while not state.done():
         read = wire.send(*cell_snapshots(state))
         t0 = time.perf_counter()
-        team, graph = read()
-        online.offer_team(team)
-        online.offer_graph(graph, wire.checked)
+        got = read()
+        if len(got) == 3:  # a live cell's view, as the scheduler node offers it
+            online.offer_cell(*got)
+        else:
+            online.offer_team(got[0])
+            online.offer_graph(got[1])
         fallbacks = getattr(online.policy, "fallbacks", 0)
         d = online.decide(started=t0)  # the budget counts from the messages' arrival, as in the node
         seconds = time.perf_counter() - t0

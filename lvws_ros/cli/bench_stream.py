@@ -83,9 +83,7 @@ def run_stream(robots: int = 1000, target: int = 100_000, jobs_per_unit: float =
         t0 = time.perf_counter()
         follower.take(convert.changes_from_msg(msg))
         assert follower.cell is not None and not follower.needs_resync
-        team, graph = follower.cell.snapshots()
-        core.offer_team(team)
-        core.offer_graph(graph)
+        core.offer_cell(*follower.cell.view())  # as the scheduler node offers it
         decision = core.decide(started=t0)
         core.changes.clear()  # what the node reports on /diagnostics, then drops
         core.notices.clear()
