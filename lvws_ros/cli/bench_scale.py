@@ -187,10 +187,12 @@ class _ChangeWire(_SnapshotWire):
                 return follower.cell.view()  # as the scheduler node offers it
         else:
             self.seq += 1
-            msg = self.convert.changes_to_msg(changes_between(self.sent, (team, graph), self.seq))
+            from rclpy.serialization import serialize_message
+
+            data = serialize_message(self.convert.changes_to_msg(changes_between(self.sent, (team, graph), self.seq)))
 
             def read() -> Any:
-                follower.take(self.convert.changes_from_msg(msg))
+                follower.take(self.convert.changes_from_serialized(data))  # as the node reads them: the bytes
                 assert follower.cell is not None
                 return follower.cell.view()
         self.sent = (team, graph)

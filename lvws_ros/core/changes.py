@@ -201,11 +201,13 @@ class LiveCell:
             raise ChangeRefused(f"CellChanges {ch.seq} {str(exc).replace('TeamState ', '').replace('TaskGraph ', '')}"
                                 ) from None
         rewired = [t for t in ch.tasks if t.id in self.tasks and t.prerequisites != self.tasks[t.id].prerequisites]
-        edges = {t.id: tuple(t.prerequisites) for t in ch.tasks}
-        if rewired:
-            edges = {**{k: tuple(t.prerequisites) for k, t in self.tasks.items()}, **edges}
+        edges = {t.id: tuple(t.prerequisites) for t in ch.tasks if t.id not in self.tasks}  # a cycle needs a new
+        if rewired:  # task, or a known one that waits on more than it did
+            edges = {**{k: tuple(t.prerequisites) for k, t in self.tasks.items()},
+                     **{t.id: tuple(t.prerequisites) for t in ch.tasks}}
         try:
-            check_acyclic(tuple(sorted(edges.items())))
+            if edges:
+                check_acyclic(tuple(sorted(edges.items())))
         except InstanceError as exc:
             raise ChangeRefused(f"CellChanges {ch.seq}: {exc}") from None
 

@@ -497,6 +497,8 @@ def build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot,
                 columns: TaskColumns | None = None) -> State:
     """The executor state at the newer snapshot's time, with ``pending`` (task -> robots
     assigned but not yet acknowledged) counted as running (the rules of the module doc).
+    ``inst`` is the instance of ``graph`` or of an earlier snapshot of the same cell (the
+    same tasks in the same places, with the same prerequisites: :func:`same_cell`).
     With ``"departure": "each"`` a task the world took starts when it says (its members
     report themselves busy until their last task ends, at its site), and a pending one is
     given as the executor gives it, in the order it was sent (:meth:`State.start`).
@@ -551,9 +553,8 @@ def _build_state(inst: Instance, team: TeamSnapshot, graph: GraphSnapshot, pendi
     tasks = graph.tasks
     status, teams, given = (columns or TaskColumns()).read(inst, tasks)
     places = inst.task_index
-    for k in np.flatnonzero(status == _READY).tolist():  # ready only once every prerequisite is DONE
-        if any(p not in places or status[places[p]] != _DONE for p in tasks[k].prerequisites):
-            status[k] = _QUEUED
+    task, pre = inst.prerequisite_edges  # ready only once every prerequisite is DONE
+    status[task[(status[task] == _READY) & (status[pre] != _DONE)]] = _QUEUED
     for tid, robots in pending.items():
         j = places.get(tid)
         if j is not None and status[j] == TaskStatus.READY and all(r in inst.robot_index for r in robots):

@@ -36,6 +36,8 @@ from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 __all__ = ["PlanFollower", "repair"]
 
+_ASSIGNED = int(TaskStatus.ASSIGNED)  # a plain int: compared for every robot's queue at every decision
+
 
 class PlanFollower:
     """The policy that carries out a plan (module docstring). ``plan``: assignments by
@@ -90,7 +92,7 @@ class PlanFollower:
         for r in range(inst.num_robots) if ahead else free:
             # tasks started (as planned or not) since: out of the orders (a busy robot's when it is free)
             q = self.queue[r]
-            while q and state.task_status[q[0]] >= TaskStatus.ASSIGNED:
+            while q and state.task_status[q[0]] >= _ASSIGNED:
                 self._drop(q[0])
             if q and math.isinf(state.arrival(q[0], [r])):  # a subteam that can no longer get there
                 self._drop(q[0])
@@ -117,7 +119,7 @@ class PlanFollower:
             out.extend(extra.assignments)
             free -= {r for _, team in extra.assignments for r in team}
             self.by_grp += len(extra.assignments)
-        if not out and not (state.task_status == TaskStatus.ASSIGNED).any():
+        if not out and not (state.task_status == _ASSIGNED).any():
             # The plan's orders cannot go on here: GRP decides the step; what it starts leaves the plan.
             extra = self.grp.decide(state)
             for j, _ in extra.assignments:

@@ -13,6 +13,7 @@ from lvws_msgs.srv import Resync
 from rclpy.node import Node
 
 from lvws_ros.core.changes import CellChanges, ChangeFollower
+from lvws_ros.errors import InstanceError
 from lvws_ros.ros import convert, topics
 
 __all__ = ["ChangeFeed"]
@@ -31,14 +32,18 @@ class ChangeFeed:
         self.pending: Any = None  # the request in flight
 
     def read(self, msg: Any) -> tuple[CellChanges | None, str]:
-        """The message as a batch, or ``(None, why)`` for one that cannot be read (the
-        follower then needs a snapshot, and one is asked for)."""
+        """The message (or its serialized bytes: a raw subscription's) as a batch, or
+        ``(None, why)`` for one that cannot be read (the follower then needs a snapshot,
+        and one is asked for)."""
         try:
+            if isinstance(msg, bytes):
+                return convert.changes_from_serialized(msg), ""
             return convert.changes_from_msg(msg), ""
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, InstanceError) as exc:
             self.follower.needs_resync = True
             self.ask()
-            return None, f"CellChanges {msg.seq} ignored: {exc}; asking for a snapshot"
+            what = "a CellChanges" if isinstance(msg, bytes) else f"CellChanges {msg.seq}"
+            return None, f"{what} ignored: {exc}; asking for a snapshot"
 
     def ask(self) -> None:
         """Ask the world for its snapshots if the follower needs them, no request is in

@@ -359,6 +359,24 @@ class GraphReader(_Reader):
                              v["objective"], v["departure"])
 
 
+_CHANGES_BYTES = _Serialized(CellChanges, Task, _TASK_FIELDS)
+
+
+def changes_from_serialized(data: bytes) -> Changes:
+    """:func:`changes_from_msg` of a CellChanges message's serialized bytes (a raw
+    subscription's), without a message object per task or robot; InstanceError for bytes
+    that do not read."""
+    v = _CHANGES_BYTES.values(data)
+    if not isinstance(v, dict) or _TEAM_BYTES.layout is None:
+        return changes_from_msg(v if not isinstance(v, dict) else deserialize_message(data, CellChanges))
+    task_key, task_fields = _GRAPH_BYTES.key, _GRAPH_BYTES.fields
+    robot_key, robot_fields = _TEAM_BYTES.key, _TEAM_BYTES.fields
+    return Changes(int(v["seq"]), _seconds(v["header.stamp.sec"], v["header.stamp.nanosec"]),
+                   tuple(_task_of_fields(task_key(t), task_fields(t)) for t in v["tasks"]), tuple(v["tasks_cancelled"]),
+                   tuple(v["tasks_retired"]), tuple(_robot_of_fields(robot_key(r), robot_fields(r)) for r in v["robots"]),
+                   tuple(v["robots_left"]))
+
+
 class TeamReader(_Reader):
     """:func:`team_from_msg` for the messages of one stream, as :class:`GraphReader`."""
 

@@ -275,7 +275,7 @@ class SchedulerNode(LifecycleNode):
         # the snapshots come as their serialized bytes: read without a message object per task
         self.create_subscription(TeamState, topics.TEAM_TOPIC, self.on_team, topics.TEAM_QOS, raw=True)
         self.create_subscription(TaskGraph, topics.GRAPH_TOPIC, self.on_graph, topics.GRAPH_QOS, raw=True)
-        self.create_subscription(CellChanges, topics.CHANGES_TOPIC, self.on_changes, topics.CHANGES_QOS)
+        self.create_subscription(CellChanges, topics.CHANGES_TOPIC, self.on_changes, topics.CHANGES_QOS, raw=True)
         self.follower = ChangeFollower(float(values["retire_after"]))  # the world's changes, once it sends some
         self.feed = ChangeFeed(self, self.follower, lambda res: self.guarded(lambda: self.resynced(res)),
                                self.when_idle)
@@ -408,7 +408,7 @@ class SchedulerNode(LifecycleNode):
         self.arrived = time.perf_counter()
         self.take("TaskGraph", lambda core: core.offer_graph(self.graph_reader.read_serialized(data)))
 
-    def on_changes(self, msg: CellChanges) -> None:
+    def on_changes(self, msg: bytes) -> None:
         """A batch of the world's changes: taken in order (a gap or a batch that cannot
         apply: a WARN and a resync), then the cell as it now is goes to the core."""
         self.received += 1

@@ -10,14 +10,25 @@ from action_msgs.msg import GoalStatus, GoalStatusArray
 from diagnostic_msgs.msg import DiagnosticArray
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from lvws_msgs.msg import TaskGraph, TeamState
+from lvws_msgs.msg import CellChanges, TaskGraph, TeamState
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from rosidl_parser import definition
 
+from lvws_ros.core.changes import CellChanges as Changes
 from lvws_ros.core.online import GraphSnapshot, RobotInfo, TaskInfo, TeamSnapshot
 from lvws_ros.errors import InstanceError
-from lvws_ros.ros.convert import GraphReader, TeamReader, graph_from_msg, graph_to_msg, team_from_msg, team_to_msg
+from lvws_ros.ros.convert import (
+    GraphReader,
+    TeamReader,
+    changes_from_msg,
+    changes_from_serialized,
+    changes_to_msg,
+    graph_from_msg,
+    graph_to_msg,
+    team_from_msg,
+    team_to_msg,
+)
 from lvws_ros.ros.serialized import Layout, Unreadable, layout_of
 
 
@@ -85,6 +96,26 @@ def test_a_team_state_reads_from_its_bytes_as_rclpy_reads_it(items: list[RobotIn
     data = serialize_message(msg)
     assert layout_of(TeamState).read(data) == flat(deserialize_message(data, TeamState))
     assert TeamReader().read_serialized(data) == team_from_msg(msg)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**63), st.lists(tasks(), max_size=5), st.lists(text, max_size=3), st.lists(text, max_size=3),
+       st.lists(robots(), max_size=5), st.lists(text, max_size=3), st.integers(0, 10**6))
+def test_a_batch_of_changes_reads_from_its_bytes_as_rclpy_reads_it(seq: int, items: list[TaskInfo], cancelled: list,
+                                                                  retired: list, members: list[RobotInfo], left: list,
+                                                                  stamp: int) -> None:
+    msg = changes_to_msg(Changes(seq, stamp + 0.5, tuple(items), tuple(cancelled), tuple(retired), tuple(members),
+                                 tuple(left)))
+    data = serialize_message(msg)
+    assert layout_of(CellChanges).read(data) == flat(deserialize_message(data, CellChanges))
+    assert changes_from_serialized(data) == changes_from_msg(msg)
+
+
+def test_a_batch_whose_bytes_do_not_read_is_refused_naming_the_message() -> None:
+    data = serialize_message(changes_to_msg(Changes(3, 1.0, graph().tasks)))
+    for bad in (data[: len(data) // 2], b"", bytes(7)):
+        with pytest.raises(InstanceError, match="CellChanges"):
+            changes_from_serialized(bad)
 
 
 @settings(max_examples=60, deadline=None)

@@ -173,9 +173,9 @@ def test_a_task_no_robot_can_reach_is_held_back_with_its_dependents():
 def test_an_unacknowledged_assignment_counts_its_travel():
     sim = CellSim(CFG)
     team, graph = sim.team_snapshot(), sim.graph_snapshot()
-    inst = build_instance(team, graph)
     ready = replace(graph, tasks=tuple(replace(t, status=1, prerequisites=()) if t.id == "t04" else t
                                        for t in graph.tasks))
+    inst = build_instance(team, ready)
     state = build_state(inst, team, ready, {"t04": ("jackal_2",)})
     j, r = inst.task_index["t04"], inst.robot_index["jackal_2"]
     go = inst.travel.arrival([r], [inst.travel.robot_site[r]], j)
