@@ -383,6 +383,17 @@ class ChangeFollower:
         self._hold(ch)
         return self._drain()
 
+    def start_from(self, team: TeamSnapshot, graph: GraphSnapshot, first: CellChanges) -> bool:
+        """Before ``first``, the first batch taken, when it is number 1 and nothing was
+        taken yet: the world's first snapshots (change 0, which a world that speaks changes
+        publishes once, latched) as the cell, so that batch 1 needs no resync. Whether they
+        were taken (InstanceError for snapshots that cannot be used: nothing taken)."""
+        if self.cell is not None or first.seq != 1 or abs(team.stamp - graph.stamp) > UNTIL_EPS \
+                or first.stamp < team.stamp:
+            return False
+        self.cell = LiveCell(team, graph, 0)
+        return True
+
     def resync(self, team: TeamSnapshot, graph: GraphSnapshot, seq: int) -> None:
         """Take the world's snapshots as of batch ``seq``, then the held batches after it
         (InstanceError, nothing taken, for snapshots that cannot be used)."""

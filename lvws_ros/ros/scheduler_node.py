@@ -417,7 +417,18 @@ class SchedulerNode(LifecycleNode):
         if batch is None:
             self.report(DiagnosticStatus.WARN, why)
             return
-        self.when_idle(lambda: self.guarded(lambda: self.follow(lambda: self.follower.take(batch))))
+        self.when_idle(lambda: self.guarded(lambda: self.follow(lambda: self.take_batch(batch))))
+
+    def take_batch(self, batch: Any) -> bool:
+        """Let the follower take a batch; batch 1 to a node that holds the world's first
+        snapshots (change 0) starts from them, without a resync."""
+        core = self.core
+        if self.follower.cell is None and core is not None and core.team is not None and core.graph is not None:
+            try:
+                self.follower.start_from(core.team, core.graph, batch)
+            except LvwsError:
+                pass  # the follower asks for the world's snapshots
+        return self.follower.take(batch)
 
     def follow(self, take: Callable[[], bool]) -> None:
         """Let the follower take a batch or a resync; offer the cell to the core if it changed."""

@@ -11,7 +11,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lvws_ros.core.changes import CellChanges, ChangeGap, ChangeRefused, LiveCell, changes_between, without_retired
+from lvws_ros.core.changes import (
+    CellChanges,
+    ChangeFollower,
+    ChangeGap,
+    ChangeRefused,
+    LiveCell,
+    changes_between,
+    without_retired,
+)
 from lvws_ros.core.executor import State, TaskStatus
 from lvws_ros.core.online import (
     GraphSnapshot,
@@ -268,3 +276,19 @@ def test_without_retired_drops_retired_tasks_and_their_names_and_keeps_the_other
     assert [t.id for t in kept] == ["b", "c", "d"]
     assert kept[0].prerequisites == ("c",) and kept[1] is c and kept[2] is d
     assert list(without_retired((a, b), set())) == [a, b] and list(without_retired((a, b), set()))[1] is b
+
+
+def test_the_first_snapshots_start_the_cell_for_batch_one_and_for_no_other() -> None:
+    world = ToyWorld()
+    world.add([], 0)
+    first = world.snapshots()
+    world.start(0)
+    world.time += 1.0
+    batch = changes_between(first, world.snapshots(), 1)
+    follower = ChangeFollower()
+    assert not follower.start_from(*first, replace(batch, seq=2))  # a batch after a gap: the world's snapshots
+    assert not follower.start_from(first[0], replace(first[1], stamp=0.5), batch)  # not one instant
+    assert follower.start_from(*first, batch) and follower.take(batch)
+    assert not follower.needs_resync and follower.resyncs == 0 and follower.cell is not None
+    assert as_dicts(*follower.cell.snapshots()) == as_dicts(*world.snapshots())
+    assert not follower.start_from(*first, batch)  # once only

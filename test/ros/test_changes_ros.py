@@ -121,6 +121,33 @@ def test_a_late_node_that_misses_changes_and_gets_a_bad_one_resyncs_and_finishes
     assert all(convert.from_time(m.state_latency) > 0 for m in probe.got)
 
 
+def test_a_node_that_heard_the_first_snapshots_follows_batch_one_without_a_resync(ros_context):
+    inst = random_instance(np.random.default_rng(4), 5, 20, "from-zero")
+    with scheduler_probe(ros_context, "zero_world", ["-p", "policy:=grp", "-p", "ack_timeout:=60.0"]) as probe:
+        world = ChangeWorld(probe.node, inst)
+        probe.spin(60.0, lambda: world.changes_pub.get_subscription_count() > 0
+                   and world.graph_pub.get_subscription_count() > 0 and world.team_pub.get_subscription_count() > 0)
+        assigned: dict[str, int] = {}
+        while not world.state.done():
+            stamp = world.state.time
+            world.publish()
+            seen = len(probe.got)
+            probe.spin(10.0, answered(probe.got, seen, stamp))
+            for m in probe.got[seen:]:
+                for a in m.assignments if abs(convert.from_time(m.team_stamp) - stamp) < 1e-9 else ():
+                    assigned[a.task_id] = assigned.get(a.task_id, 0) + 1
+                    world.state.start(inst.task_index[a.task_id], [inst.robot_index[r] for r in a.robot_ids])
+            nxt = world.state.next_event_time()
+            assert nxt is not None, probe.output[-3000:]
+            world.state.time = nxt
+            world.state.refresh()
+        probe.spin(1.5)  # the last diagnostics
+    assert world.seq > 3 and world.resyncs == 0  # the first snapshots were change 0
+    assert set(assigned) == {t.id for t in inst.tasks} and set(assigned.values()) == {1}
+    assert check_schedule(inst, schedule_from_state(world.state, "grp")) == []
+    assert max(int(v.get("changes_seq", 0)) for v in probe.values) == world.seq
+
+
 def test_the_simulator_speaks_changes_with_done_work_retiring_and_its_bag_reads_back(tmp_path):
     from lvws_ros.ros.bag import read_run
     from lvws_ros.ros.launcher import launch
