@@ -113,19 +113,21 @@ class LiveCell:
     """A cell's team and task graph: a snapshot pair (:meth:`reset`) and the batches after it
     (:meth:`apply`); :meth:`snapshots` gives them as the world's snapshots would."""
 
-    def __init__(self, team: TeamSnapshot, graph: GraphSnapshot, seq: int = 0) -> None:
+    def __init__(self, team: TeamSnapshot, graph: GraphSnapshot, seq: int = 0, checked: bool = False) -> None:
         self.retired: set[str] = set()  # ids that left for good (kept: they never come back)
         self.retired_count = 0
-        self.reset(team, graph, seq)
+        self.reset(team, graph, seq, checked)
 
     # -- taking a snapshot -------------------------------------------------------------
-    def reset(self, team: TeamSnapshot, graph: GraphSnapshot, seq: int = 0) -> None:
+    def reset(self, team: TeamSnapshot, graph: GraphSnapshot, seq: int = 0, checked: bool = False) -> None:
         """Take a snapshot pair as the cell as of change ``seq`` (a resync); tasks retired
-        before are left out of it, and its tasks no longer name them."""
+        before are left out of it, and its tasks no longer name them. ``checked``: both
+        passed :func:`check_team` and :func:`check_graph` already (a scheduler took them)."""
         if self.retired & {t.id for t in graph.tasks}:
             graph = replace(graph, tasks=tuple(without_retired(graph.tasks, self.retired)))
-        check_team(team)
-        check_graph(graph)
+        if not checked:
+            check_team(team)
+            check_graph(graph)
         self.seq = seq
         self.team_base, self.graph_base = team, graph  # names, sites, traits, objective: what changes never change
         self._restore(team, graph)
@@ -383,15 +385,16 @@ class ChangeFollower:
         self._hold(ch)
         return self._drain()
 
-    def start_from(self, team: TeamSnapshot, graph: GraphSnapshot, first: CellChanges) -> bool:
+    def start_from(self, team: TeamSnapshot, graph: GraphSnapshot, first: CellChanges, checked: bool = False) -> bool:
         """Before ``first``, the first batch taken, when it is number 1 and nothing was
         taken yet: the world's first snapshots (change 0, which a world that speaks changes
         publishes once, latched) as the cell, so that batch 1 needs no resync. Whether they
-        were taken (InstanceError for snapshots that cannot be used: nothing taken)."""
+        were taken. ``checked``: both passed the snapshot checks already (a scheduler took
+        them); else InstanceError for snapshots that cannot be used (nothing taken)."""
         if self.cell is not None or first.seq != 1 or abs(team.stamp - graph.stamp) > UNTIL_EPS \
                 or first.stamp < team.stamp:
             return False
-        self.cell = LiveCell(team, graph, 0)
+        self.cell = LiveCell(team, graph, 0, checked)
         return True
 
     def resync(self, team: TeamSnapshot, graph: GraphSnapshot, seq: int) -> None:

@@ -14,9 +14,11 @@ is gone.
 
 Messages (pickled over a one-way :func:`multiprocessing.Pipe` each way): to the child
 ``("cell", Instance)``, ``("state", seq, StatePayload)``, ``("stop",)``; to the parent
-``("ready",)`` once, then ``("plan", bytes)``: a :class:`PlanUpdate` pickled by the child
+``("ready",)`` once, then ``("plan", seq, bytes)``: a :class:`PlanUpdate` pickled by the child
 (``seq``: the number of the state the plan is made from), which the receiver thread unpickles
-only when it is the newest that arrived. As with every ``spawn`` start, a script
+only when it is the newest that arrived and, once a plan was handed over, made from the newest
+state sent (a plan from an older one has not seen the decisions since: the child sends it
+again from the newest). As with every ``spawn`` start, a script
 that starts the planner must guard its own work with ``if __name__ == "__main__":`` (the
 child imports the parent's main module); the package's entry points do.
 """
@@ -85,7 +87,7 @@ def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], paren
     def send() -> None:
         assert planner.plan is not None
         # pickled here, unpickled by the parent only when it is the newest that arrived
-        outbox.send(("plan", pickle.dumps(PlanUpdate(seq, planner.plan.schedule, planner.report()),
+        outbox.send(("plan", seq, pickle.dumps(PlanUpdate(seq, planner.plan.schedule, planner.report()),
                                           protocol=pickle.HIGHEST_PROTOCOL)))
 
     while True:
@@ -150,6 +152,7 @@ class PlannerProcess:
         self._arrived: PlanUpdate | None = None  # the newest plan, not handed over yet
         self._receiver: threading.Thread | None = None
         self._receiving = False  # the receiver thread reads the child's pipe
+        self.handed = False  # a plan was handed over (latest): plans from older states are dropped unread
         self.process: BaseProcess | None = None
         self.inbox: Connection | None = None  # plans from the child
         self.outbox: Connection | None = None  # cells and states to the child
@@ -192,8 +195,8 @@ class PlannerProcess:
             try:
                 while conn.poll(0 if newest is not None else RECEIVE_POLL):
                     msg = conn.recv()
-                    if msg[0] == "plan":
-                        newest = msg[1]
+                    if msg[0] == "plan" and (msg[1] == self.sent or not self.handed):
+                        newest = msg[2]
                     elif msg[0] == "ready":
                         with self._wake:
                             self.ready = True
@@ -260,6 +263,7 @@ class PlannerProcess:
             if self._arrived is None and wait > 0:
                 self._wake.wait_for(lambda: self._arrived is not None or not self._receiving, wait)
             out, self._arrived = self._arrived, None
+            self.handed = self.handed or out is not None
         return out
 
     def _drain(self, wait: float) -> None:

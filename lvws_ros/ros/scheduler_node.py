@@ -425,7 +425,7 @@ class SchedulerNode(LifecycleNode):
         core = self.core
         if self.follower.cell is None and core is not None and core.team is not None and core.graph is not None:
             try:
-                self.follower.start_from(core.team, core.graph, batch)
+                self.follower.start_from(core.team, core.graph, batch, checked=True)  # the core took them
             except LvwsError:
                 pass  # the follower asks for the world's snapshots
         return self.follower.take(batch)
