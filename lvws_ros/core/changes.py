@@ -196,7 +196,10 @@ class LiveCell:
                 check_task(graph, n, t, ids)
                 check_task_sites(n, t, known)
             for n, r in enumerate(ch.robots):
-                check_robot(team, n, r)
+                old = self.robots.get(r.id)  # what check_robot checks, unchanged since it passed: not again
+                if old is None or (r.capabilities, r.payload, r.traits, r.speed) != (old.capabilities, old.payload,
+                                                                                    old.traits, old.speed):
+                    check_robot(team, n, r)
                 if not math.isfinite(r.busy_for):
                     raise InstanceError(f"TeamState robots[{n}] ({r.id!r}).busy_for: {r.busy_for!r} is not finite")
         except InstanceError as exc:
