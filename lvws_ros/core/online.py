@@ -171,6 +171,9 @@ def _amounts(values: Sequence[float], names: Sequence[str], where: str) -> None:
         _finite(v, f"{where}[{n}]")
 
 
+TEAM_NEEDS = "TeamState: needs capability_names (or trait_names) and at least one robot"
+
+
 def check_team(snap: TeamSnapshot, checked: TeamSnapshot | None = None) -> None:
     """InstanceError naming the TeamState field when the snapshot cannot be used.
     ``checked``: a snapshot that passed before; its robots that ``snap`` holds at the same
@@ -178,7 +181,7 @@ def check_team(snap: TeamSnapshot, checked: TeamSnapshot | None = None) -> None:
     _finite(snap.stamp, "TeamState header.stamp", high=math.inf)
     k = len(snap.capability_names)
     if (k < 1 and not snap.trait_names) or not snap.robots:
-        raise InstanceError("TeamState: needs capability_names (or trait_names) and at least one robot")
+        raise InstanceError(TEAM_NEEDS)
     ids = [r.id for r in snap.robots]
     if len(set(ids)) != len(ids):
         raise InstanceError(f"TeamState robots: duplicate ids {sorted({i for i in ids if ids.count(i) > 1})}")
@@ -799,13 +802,18 @@ class OnlineScheduler:
         held = (self.team, self.graph)
         if delta.since is None or held[0] is None or held[1] is None or delta.since[0] is not held[0] \
                 or delta.since[1] is not held[1] or team.stamp < held[0].stamp or graph.stamp < held[1].stamp:
-            if not (self.offer_team(team) and self.offer_graph(graph, delta.checked)):
+            if not self.offer_team(team):
                 return False
-            self._until, self._by_id = delta.until, delta.by_id
+            self._until = delta.until  # the team's busy robots, whatever becomes of the graph
+            if not self.offer_graph(graph, delta.checked):
+                return False
+            self._by_id = delta.by_id
             return True
+        if not team.robots:
+            raise InstanceError(TEAM_NEEDS)
         ids = self._team_ids()
-        if delta.left:
-            self.notices.append(f"robot(s) {', '.join(sorted(delta.left))} left the team (failed?): "
+        if delta.left & ids:
+            self.notices.append(f"robot(s) {', '.join(sorted(delta.left & ids))} left the team (failed?): "
                                 "not scheduled until they come back")
         joined = sorted(delta.robots - ids)
         if joined:
@@ -867,7 +875,8 @@ class OnlineScheduler:
         """The instance of the schedulable part of the latest snapshots (:func:`schedulable`)."""
         assert self.team is not None and self.graph is not None
         now = (self.team, self.graph)
-        if self._inst is not None and not self._held and self._basis is not None and same_cell(self._basis, now):
+        if self._inst is not None and not self._held and self._basis is not None and self._view is self._basis[1] \
+                and same_cell(self._basis, now):  # the view was the whole graph (nothing held back or left out)
             self._basis, self._view = now, self.graph  # nothing held back, nothing but the run changed
             return self._inst
         view, key, held = scheduling_view(self.team, self.graph)

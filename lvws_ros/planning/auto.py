@@ -132,7 +132,9 @@ class PlannedAutoPolicy:
     def _decide_beside(self, state: State) -> Decision:
         if self.process is None or not self.process.alive():
             if self.process is not None:
-                self.notices.append("the planner's process is gone: this decision is GRP's; starting it again")
+                why = f" ({self.process.failure})" if self.process.failure else ""
+                self.notices.append(f"the planner's process is gone{why}: this decision is GRP's; starting it again")
+                self.process.stop()  # what is left of it: its threads and pipes
                 self.restarts += 1
             self.process = PlannerProcess(niceness=self.niceness, prepare=self._prepare, **self.options)
             self.process.start()

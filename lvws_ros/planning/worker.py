@@ -71,10 +71,28 @@ def _state(inst: Instance, p: StatePayload) -> State:
     return State(inst, p[0], p[1], p[2], p[3], list(p[4]), p[5], p[6])
 
 
+def lower_priority(niceness: int) -> None:
+    """This process, every thread of it (on Linux ``os.nice`` moves the calling thread only,
+    and numpy's thread pool started at import), ``niceness`` below where it runs; threads
+    started later inherit it. Raising one's own niceness needs no privilege."""
+    own = os.nice(0)
+    target = min(19, own + niceness)
+    try:
+        threads = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:  # not Linux: the process as one
+        os.nice(target - own)
+        return
+    for tid in threads:
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, max(target, os.getpriority(os.PRIO_PROCESS, tid)))
+        except OSError:  # a thread that ended meanwhile
+            pass
+
+
 def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], parent: int, niceness: int = 0) -> None:
     """The child's loop (module docstring)."""
     if niceness > 0:
-        os.nice(niceness)  # raising one's own niceness needs no privilege
+        lower_priority(niceness)
     planner = Planner(**options)
     planner.clock = Clock.OPEN_ENDED
     if planner.learned:
@@ -121,6 +139,7 @@ def _serve(inbox: Connection, outbox: Connection, options: dict[str, Any], paren
 
 
 RECEIVE_POLL = 0.1  # seconds the receiver thread waits on the pipe between looks at whether it should stop
+RECEIVE_BURST = 1000  # messages read in a row before the newest plan among them is prepared
 PICKLE_TRIES = 100  # a cell pickled while the decision thread fills one of its caches is pickled again
 
 
@@ -153,6 +172,7 @@ class PlannerProcess:
         self._receiver: threading.Thread | None = None
         self._receiving = False  # the receiver thread reads the child's pipe
         self.handed = False  # a plan was handed over (latest): plans from older states are dropped unread
+        self.failure = ""  # why the receiver thread stopped reading, when something broke it
         self.process: BaseProcess | None = None
         self.inbox: Connection | None = None  # plans from the child
         self.outbox: Connection | None = None  # cells and states to the child
@@ -189,11 +209,23 @@ class PlannerProcess:
         """Read what the child sends; keep the newest plan (older ones dropped unread: a
         plan of 5,000 tasks takes ~10 ms to unpickle), prepared; wake whoever waits. Ends
         at :meth:`stop` or when the child is gone."""
+        try:
+            self._receive(conn)
+        except Exception as exc:  # whatever breaks reading: the process counts as gone (alive), and says why
+            self.failure = f"{type(exc).__name__}: {exc}"
+        finally:
+            with self._wake:
+                self._receiving = False
+                self._wake.notify_all()
+
+    def _receive(self, conn: Connection) -> None:
         gone = False
         while not (self._closed or gone):
             newest: bytes | None = None
             try:
-                while conn.poll(0 if newest is not None else RECEIVE_POLL):
+                for _ in range(RECEIVE_BURST):  # what arrived meanwhile; then the newest plan is prepared
+                    if not conn.poll(0 if newest is not None else RECEIVE_POLL) or self._closed:
+                        break
                     msg = conn.recv()
                     if msg[0] == "plan" and (msg[1] == self.sent or not self.handed):
                         newest = msg[2]
@@ -206,13 +238,13 @@ class PlannerProcess:
             if newest is not None and not self._closed:
                 update: PlanUpdate = pickle.loads(newest)  # our own child's (the pipe's pickles are too)
                 if self.prepare is not None:
-                    update = replace(update, prepared=self.prepare(update))
+                    try:
+                        update = replace(update, prepared=self.prepare(update))
+                    except Exception:  # unprepared: the caller prepares it, as it did before
+                        pass
                 with self._wake:
                     self._arrived = update
                     self._wake.notify_all()
-        with self._wake:
-            self._receiving = False
-            self._wake.notify_all()
 
     def _send_loop(self, conn: Connection) -> None:
         while True:
@@ -238,7 +270,8 @@ class PlannerProcess:
             return self.ready
 
     def alive(self) -> bool:
-        return self.process is not None and self.process.is_alive()
+        """The child runs and its plans are read."""
+        return self.process is not None and self.process.is_alive() and self._receiving
 
     def send(self, state: State) -> bool:
         """Hand ``state`` to the child (the cell first when it changed), at once: the sender
@@ -253,7 +286,7 @@ class PlannerProcess:
                 cell = self._pending[0]  # a new cell not sent yet goes with the newer state
             self.sent += 1
             self._pending = (cell, self.sent, _payload(state.copy()))
-            self._wake.notify()
+            self._wake.notify_all()
         return True
 
     def latest(self, wait: float = 0.0) -> PlanUpdate | None:

@@ -22,6 +22,7 @@ from lvws_ros.core.changes import (
 )
 from lvws_ros.core.executor import State, TaskStatus
 from lvws_ros.core.online import (
+    BUSY_EPS,
     GraphSnapshot,
     OnlineScheduler,
     RobotInfo,
@@ -30,6 +31,7 @@ from lvws_ros.core.online import (
     TeamSnapshot,
     build_state,
 )
+from lvws_ros.errors import InstanceError
 from lvws_ros.policies.baselines import GreedyPayloadPolicy
 
 Q, R, A, D = (int(s) for s in (TaskStatus.QUEUED, TaskStatus.READY, TaskStatus.ASSIGNED, TaskStatus.DONE))
@@ -292,3 +294,31 @@ def test_the_first_snapshots_start_the_cell_for_batch_one_and_for_no_other() -> 
     assert not follower.needs_resync and follower.resyncs == 0 and follower.cell is not None
     assert as_dicts(*follower.cell.snapshots()) == as_dicts(*world.snapshots())
     assert not follower.start_from(*first, batch)  # once only
+
+
+def test_a_live_cell_s_pair_is_taken_whole_or_its_team_with_the_times_it_came_with() -> None:
+    busy = RobotInfo("r0", "x", False, (1, 1), 2.0, current_task="a", busy_for=5.0)
+    tasks = (TaskInfo("a", A, (1, 0), 1.0, 5.0, assigned_robots=("r0",), start=4.0), TaskInfo("b", R, (1, 0), 1.0, 2.0))
+    core = OnlineScheduler(GreedyPayloadPolicy())
+    core.offer_team(TeamSnapshot(3.0, CAPS, (busy,)))  # heard on the topics before following
+    core.offer_graph(GraphSnapshot(10.0, CAPS, tasks))
+    follower = ChangeFollower()
+    follower.resync(TeamSnapshot(4.0, CAPS, (busy,)), GraphSnapshot(4.0, CAPS, tasks), 0)  # r0 busy until 9
+    follower.take(CellChanges(1, 8.0, tasks=(TaskInfo("c", Q, (1, 0), 1.0, 2.0, ("b",)),)))
+    assert follower.cell is not None
+    team, graph, delta = follower.cell.view()
+    assert not core.offer_cell(team, graph, delta)  # the graph is older than the one held: not taken
+    assert core.team is team  # the team is: with its robots' end times
+    state = build_state(core.instance(), core.team, core._view, {}, core._until)
+    assert state.robot_free_at[0] == pytest.approx(10.0 + BUSY_EPS)  # until 9 as the cell says: overdue at 10
+
+
+def test_a_batch_that_leaves_no_robot_is_refused_as_an_empty_team_snapshot_is() -> None:
+    team = TeamSnapshot(0.0, CAPS, (RobotInfo("r0", "x", True, (1, 1), 2.0),))
+    cell = LiveCell(team, GraphSnapshot(0.0, CAPS, (TaskInfo("a", R, (1, 0), 1.0, 2.0),)))
+    core = OnlineScheduler(GreedyPayloadPolicy())
+    assert core.offer_cell(*cell.view())
+    cell.apply(CellChanges(1, 1.0, left=("r0",)))
+    with pytest.raises(InstanceError, match="at least one robot"):
+        core.offer_cell(*cell.view())
+    assert core.team is not None and len(core.team.robots) == 1  # the last good one stays

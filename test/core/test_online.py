@@ -388,3 +388,26 @@ def test_a_decision_is_due_by_one_rule(free, ready, seen_free, seen_ready, runni
     from lvws_ros.core.online import is_due
 
     assert is_due(free, ready, seen_free, seen_ready, running, ahead) is due
+
+
+def test_a_done_task_no_robot_present_covers_leaves_the_state_aligned_with_its_instance() -> None:
+    # The only lifter failed after its task was done: that task leaves the view (its
+    # dependents' prerequisite is met); the next decision, with nothing else new about the
+    # cell, still reads the state from the view the instance was built of.
+    from lvws_ros.core.online import GraphSnapshot, TeamSnapshot
+    from lvws_ros.policies.baselines import GreedyPayloadPolicy
+
+    caps = ("arm", "lift")
+    r0 = RobotInfo("r0", "x", True, (1, 0), 2.0)
+    done = TaskInfo("d", 3, (0, 1), 1.0, 2.0, start=0.0, end=2.0)
+    a, b = TaskInfo("a", 1, (1, 0), 1.0, 2.0), TaskInfo("b", 1, (1, 0), 1.0, 2.0)
+    core = OnlineScheduler(GreedyPayloadPolicy(), ack_timeout=1e9)
+    core.offer_team(TeamSnapshot(3.0, caps, (r0,)))
+    core.offer_graph(GraphSnapshot(3.0, caps, (done, a, b)))
+    first = core.decide()
+    assert first is not None and first.assignments == (("a", ("r0",)),)
+    core.offer_team(TeamSnapshot(5.0, caps, (r0,)))
+    core.offer_graph(GraphSnapshot(5.0, caps, (done, dataclasses.replace(a, status=3, assigned_robots=("r0",),
+                                                                           start=3.0, end=5.0), b)))
+    second = core.decide()
+    assert second is not None and second.assignments == (("b", ("r0",)),)
