@@ -374,13 +374,23 @@ class ChangeFollower:
         self.held: dict[int, CellChanges] = {}
         self.needs_resync = False
         self.notices: list[str] = []  # for the node's diagnostics (WARN)
-        self.gaps = self.refused = self.repeated = self.resyncs = 0
+        self.gaps = self.refused = self.repeated = self.resyncs = self.restarts = 0
+        self.restarted = False  # a world started again since the last snapshot
 
     def take(self, ch: CellChanges) -> bool:
         """Take one batch; whether the cell changed."""
         if self.cell is None:
             self._hold(ch)
             self.needs_resync = True
+            return False
+        if ch.seq == 1 < self.cell.seq and not self.restarted:  # numbers are never reused while a world runs
+            self.held.clear()
+            self.notices.append(f"CellChanges 1 after {self.cell.seq}: the world started again; asking for its "
+                                "snapshot")
+            self.restarts += 1
+            self.restarted = self.needs_resync = True
+        if self.needs_resync:  # until the world's snapshot says which batches it covers
+            self._hold(ch)
             return False
         if ch.seq <= self.cell.seq:
             self.repeated += 1
@@ -403,10 +413,11 @@ class ChangeFollower:
     def resync(self, team: TeamSnapshot, graph: GraphSnapshot, seq: int) -> None:
         """Take the world's snapshots as of batch ``seq``, then the held batches after it
         (InstanceError, nothing taken, for snapshots that cannot be used)."""
-        if self.cell is None:
+        if self.cell is None or self.restarted:  # a world started again: its ids owe nothing to the last one's
             self.cell = LiveCell(team, graph, seq)
         else:
             self.cell.reset(team, graph, seq)
+        self.restarted = False
         self.resyncs += 1
         self.needs_resync = False
         self._drain()

@@ -322,3 +322,30 @@ def test_a_batch_that_leaves_no_robot_is_refused_as_an_empty_team_snapshot_is() 
     with pytest.raises(InstanceError, match="at least one robot"):
         core.offer_cell(*cell.view())
     assert core.team is not None and len(core.team.robots) == 1  # the last good one stays
+
+
+def test_batch_one_after_later_ones_is_a_world_started_again_and_its_cell_starts_anew() -> None:
+    old = ToyWorld()
+    before = old.snapshots()
+    follower = ChangeFollower()
+    follower.resync(*before, 0)
+    for seq, step in enumerate(("add", "start", "finish", "retire"), start=1):  # t0 retires from the old world
+        run_ops(old, step, [], 0)
+        old.time += 1.0
+        after = old.snapshots()
+        follower.take(changes_between(before, after, seq))
+        before = after
+    assert follower.cell is not None and follower.cell.seq == 4 and "t0" in follower.cell.retired
+    new = ToyWorld(robots=2)
+    zero = new.snapshots()
+    new.add([], 1)  # its own t0
+    one = new.snapshots()
+    assert not follower.take(changes_between(zero, one, 1))
+    assert follower.needs_resync and follower.restarts == 1 and "started again" in follower.notices[-1]
+    new.time += 1.0
+    new.add([], 0)
+    two = new.snapshots()
+    assert not follower.take(changes_between(one, two, 2))  # held until the snapshot says what it covers
+    follower.resync(*one, 1)
+    assert follower.cell.seq == 2 and as_dicts(*follower.cell.snapshots()) == as_dicts(*two)
+    assert follower.repeated == 0
