@@ -339,6 +339,8 @@ def check_acyclic(structure: tuple[tuple[str, tuple[str, ...]], ...]) -> None:
 def trait_pairs(names: Sequence[str], amounts: Sequence[float]) -> tuple[tuple[str, float], ...]:
     """A snapshot's amounts (in the order of its trait names) as an instance's (trait,
     amount) pairs, the zeros left out."""
+    if not names:  # a cell without traits: every item of it
+        return ()
     return tuple((c, float(a)) for c, a in zip(names, amounts, strict=False) if a > 0)
 
 
@@ -363,10 +365,10 @@ def build_instance(team: TeamSnapshot, graph: GraphSnapshot, name: str = "online
         raise InstanceError(f"team traits {list(team.trait_names)} differ from the task graph's "
                             f"{list(graph.trait_names)}")
     traits = tuple(graph.trait_names)
-    robots = tuple(Robot(r.id, tuple(int(c) for c in r.capabilities), float(r.payload),
+    robots = tuple(Robot(r.id, tuple(map(int, r.capabilities)), float(r.payload),
                          traits=trait_pairs(traits, r.traits))
                    for r in team.robots)
-    tasks = tuple(Task(t.id, tuple(int(c) for c in t.capabilities), float(t.payload), float(t.duration),
+    tasks = tuple(Task(t.id, tuple(map(int, t.capabilities)), float(t.payload), float(t.duration),
                        tuple(t.prerequisites),
                        requires=trait_pairs(traits, t.requires), roles=roles_of(t.roles))
                   for t in graph.tasks)
