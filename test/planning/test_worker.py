@@ -1,6 +1,7 @@
-"""The planner's process: stopping it ends the child and the sender thread even when both
-pipes are full (a child blocked sending plans nobody reads, a sender blocked sending states
-to that child)."""
+"""The planner's process: stopping it ends the child and its threads while the child is busy
+with a large cell and states keep coming (the sender blocked on a full pipe to it, when it
+gets there); plans are handed over newest first, prepared off the caller's thread; the child
+runs below its parent's priority."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from lvws_ros.core.executor import State
 from lvws_ros.planning.worker import PlannerProcess
 
 
-def test_stop_ends_a_child_and_a_sender_blocked_on_full_pipes() -> None:
+def test_stop_ends_a_busy_child_and_its_threads_while_states_keep_coming() -> None:
     inst = subteam_heavy_instance(np.random.default_rng(0), 200, 1000, "full-pipes")  # plans and states of tens of KB
     proc = PlannerProcess(seed=0, workers=1, learned=False)
     proc.start()
@@ -22,11 +23,11 @@ def test_stop_ends_a_child_and_a_sender_blocked_on_full_pipes() -> None:
     try:
         assert proc.wait_ready(60.0)
         state = State.initial(inst)
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline:  # states until the sender is stuck on a full pipe
+        deadline = time.monotonic() + 6.0
+        while time.monotonic() < deadline:  # states while the child plans (the sender stuck, if it gets stuck)
             proc.send(state)
             time.sleep(0.05)
-            if proc._pending is not None and time.monotonic() > deadline - 25.0:
+            if proc._pending is not None and time.monotonic() > deadline - 4.0:
                 break
         stopper = threading.Thread(target=proc.stop, daemon=True)
         stopper.start()

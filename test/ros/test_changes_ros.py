@@ -122,7 +122,7 @@ def test_a_late_node_that_misses_changes_and_gets_a_bad_one_resyncs_and_finishes
 
 
 def test_a_node_that_heard_the_first_snapshots_follows_batch_one_without_a_resync(ros_context):
-    inst = random_instance(np.random.default_rng(4), 5, 20, "from-zero")
+    inst = random_instance(np.random.default_rng(4), 4, 10, "from-zero")
     with scheduler_probe(ros_context, "zero_world", ["-p", "policy:=grp", "-p", "ack_timeout:=60.0"]) as probe:
         world = ChangeWorld(probe.node, inst)
         probe.spin(60.0, lambda: world.changes_pub.get_subscription_count() > 0
